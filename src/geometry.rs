@@ -1,0 +1,219 @@
+//! Exact geometric kernels: solid angles, point-to-polygon form factors, clipping, subdivision.
+//!
+//! Naming rule: `x` is a receiving point, `n_x` its unit normal, `tri`/`poly` a sending polygon;
+//! every kernel here is analytic (no sampling), so it stays finite for neighbours that share an edge
+//! or a vertex. All tolerances of the crate live in this module.
+
+use glam::DVec3;
+
+/// Relative tolerance for "this point lies in that plane": distances below
+/// `PLANE_EPS * size` count as zero, where `size` is the larger triangle's longest edge.
+pub const PLANE_EPS: f64 = 1e-9;
+
+/// Self-intersection offset for visibility rays, relative to the scene's diameter (the solver and
+/// the path tracer work in a frame where the diameter is 1).
+pub const RAY_EPS: f64 = 1e-6;
+
+/// A triangle by its three corners.
+pub type Tri = [DVec3; 3];
+
+/// Unit normal of a triangle (counter-clockwise = front), or `None` when it has no area.
+pub fn normal(tri: &Tri) -> Option<DVec3> {
+    let n = (tri[1] - tri[0]).cross(tri[2] - tri[0]);
+    let len = n.length();
+    (len > 0.0 && len.is_finite()).then(|| n / len)
+}
+
+/// Area of a triangle.
+pub fn area(tri: &Tri) -> f64 {
+    0.5 * (tri[1] - tri[0]).cross(tri[2] - tri[0]).length()
+}
+
+/// Centroid of a triangle.
+pub fn centroid(tri: &Tri) -> DVec3 {
+    (tri[0] + tri[1] + tri[2]) / 3.0
+}
+
+/// Longest edge of a triangle.
+pub fn longest_edge(tri: &Tri) -> f64 {
+    (tri[1] - tri[0])
+        .length()
+        .max((tri[2] - tri[1]).length())
+        .max((tri[0] - tri[2]).length())
+}
+
+/// Solid angle (sr, in [0, 2 pi]) that triangle `tri` subtends at point `x`.
+///
+/// Van Oosterom and Strackee's formula; exact, orientation independent, 0 when `x` is in the
+/// triangle's plane outside it.
+pub fn solid_angle(x: DVec3, tri: &Tri) -> f64 {
+    let a = tri[0] - x;
+    let b = tri[1] - x;
+    let c = tri[2] - x;
+    let (la, lb, lc) = (a.length(), b.length(), c.length());
+    if la == 0.0 || lb == 0.0 || lc == 0.0 {
+        return 0.0;
+    }
+    let num = a.dot(b.cross(c)).abs();
+    let den = la * lb * lc + a.dot(b) * lc + a.dot(c) * lb + b.dot(c) * la;
+    let omega = 2.0 * num.atan2(den);
+    if omega.is_finite() {
+        omega.abs()
+    } else {
+        0.0
+    }
+}
+
+/// Point-to-triangle form factor: (1/pi) * projected solid angle of `tri` seen from `x` with
+/// normal `n_x`, i.e. the integral of cos(theta_x) |cos(theta_y)| / (pi r^2) over the triangle.
+///
+/// Lambert's contour formula, exact. Precondition: `tri` lies entirely in the closed half-space in
+/// front of `x` (clip it first with [`clip_to_front`]); then the result is in [0, 1].
+pub fn point_form_factor(x: DVec3, n_x: DVec3, tri: &Tri) -> f64 {
+    let r = [tri[0] - x, tri[1] - x, tri[2] - x];
+    let mut sum = 0.0;
+    for i in 0..3 {
+        let (a, b) = (r[i], r[(i + 1) % 3]);
+        let cross = a.cross(b);
+        let cross_len = cross.length();
+        if cross_len == 0.0 {
+            continue;
+        }
+        let theta = cross_len.atan2(a.dot(b));
+        sum += theta * n_x.dot(cross) / cross_len;
+    }
+    let f = (sum / (2.0 * std::f64::consts::PI)).abs();
+    if f.is_finite() {
+        f.min(1.0)
+    } else {
+        0.0
+    }
+}
+
+/// A convex polygon of at most 4 corners (a triangle clipped by one plane).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Poly {
+    /// Corners, the first `len` are valid.
+    pub v: [DVec3; 4],
+    /// Number of valid corners (0, 3 or 4).
+    pub len: usize,
+}
+
+impl Poly {
+    /// The polygon as 0, 1 or 2 triangles (fan from the first corner).
+    pub fn triangles(&self) -> impl Iterator<Item = Tri> + '_ {
+        (1..self.len.saturating_sub(1)).map(move |i| [self.v[0], self.v[i], self.v[i + 1]])
+    }
+}
+
+/// Splits `tri` by the plane through `p` with normal `n` into the part strictly in front
+/// (`n . (y - p) > 0`) and the part behind. Points within `tol` of the plane count as on it.
+pub fn clip_by_plane(tri: &Tri, p: DVec3, n: DVec3, tol: f64) -> (Poly, Poly) {
+    let d = [
+        n.dot(tri[0] - p),
+        n.dot(tri[1] - p),
+        n.dot(tri[2] - p),
+    ];
+    let d = d.map(|x| if x.abs() <= tol { 0.0 } else { x });
+    let mut front = Poly::default();
+    let mut back = Poly::default();
+    for i in 0..3 {
+        let j = (i + 1) % 3;
+        let (a, b, da, db) = (tri[i], tri[j], d[i], d[j]);
+        if da >= 0.0 && front.len < 4 {
+            front.v[front.len] = a;
+            front.len += 1;
+        }
+        if da <= 0.0 && back.len < 4 {
+            back.v[back.len] = a;
+            back.len += 1;
+        }
+        if (da > 0.0 && db < 0.0) || (da < 0.0 && db > 0.0) {
+            let t = da / (da - db);
+            let q = a + (b - a) * t;
+            if front.len < 4 {
+                front.v[front.len] = q;
+                front.len += 1;
+            }
+            if back.len < 4 {
+                back.v[back.len] = q;
+                back.len += 1;
+            }
+        }
+    }
+    // A polygon lying entirely in the plane has no side; drop degenerate results.
+    if d.iter().all(|&x| x <= 0.0) {
+        front.len = 0;
+    }
+    if d.iter().all(|&x| x >= 0.0) {
+        back.len = 0;
+    }
+    if front.len < 3 {
+        front.len = 0;
+    }
+    if back.len < 3 {
+        back.len = 0;
+    }
+    (front, back)
+}
+
+/// The `m * m` congruent sub-triangles of `tri` (uniform midpoint-style subdivision), in a fixed
+/// order. `m >= 1`.
+pub fn subdivide(tri: &Tri, m: usize) -> impl Iterator<Item = Tri> + '_ {
+    let m = m.max(1);
+    let inv = 1.0 / m as f64;
+    let e1 = (tri[1] - tri[0]) * inv;
+    let e2 = (tri[2] - tri[0]) * inv;
+    let at = move |i: usize, j: usize| tri[0] + e1 * i as f64 + e2 * j as f64;
+    (0..m).flat_map(move |i| {
+        (0..m - i).flat_map(move |j| {
+            let up = [at(i, j), at(i + 1, j), at(i, j + 1)];
+            let down = (i + j + 1 < m).then(|| [at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)]);
+            std::iter::once(up).chain(down)
+        })
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn subdivide_covers_area() {
+        let tri = [DVec3::ZERO, DVec3::X * 2.0, DVec3::new(0.3, 1.7, 0.2)];
+        for m in 1..6 {
+            let pieces: Vec<Tri> = subdivide(&tri, m).collect();
+            assert_eq!(pieces.len(), m * m);
+            let total: f64 = pieces.iter().map(area).sum();
+            assert!((total - area(&tri)).abs() < 1e-12);
+            let n = normal(&tri).unwrap();
+            for p in &pieces {
+                assert!((normal(p).unwrap() - n).length() < 1e-9, "orientation kept");
+            }
+        }
+    }
+
+    #[test]
+    fn hemisphere_solid_angle() {
+        // A huge triangle far below covers almost a hemisphere.
+        let big = 1e6;
+        let tri = [
+            DVec3::new(-big, -1.0, -big),
+            DVec3::new(big * 2.0, -1.0, -big),
+            DVec3::new(-big, -1.0, big * 2.0),
+        ];
+        let w = solid_angle(DVec3::ZERO, &tri);
+        assert!((w - 2.0 * std::f64::consts::PI).abs() < 1e-3, "{w}");
+        let f = point_form_factor(DVec3::ZERO, -DVec3::Y, &tri);
+        assert!((f - 1.0).abs() < 1e-3, "{f}");
+    }
+
+    #[test]
+    fn clip_splits_area() {
+        let tri = [DVec3::new(-1.0, 0.0, 0.0), DVec3::new(1.0, 0.0, 0.0), DVec3::new(0.0, 2.0, 0.0)];
+        let (front, back) = clip_by_plane(&tri, DVec3::new(0.0, 1.0, 0.0), DVec3::Y, 0.0);
+        let fa: f64 = front.triangles().map(|t| area(&t)).sum();
+        let ba: f64 = back.triangles().map(|t| area(&t)).sum();
+        assert!((fa - 0.5).abs() < 1e-12 && (ba - 1.5).abs() < 1e-12, "{fa} {ba}");
+    }
+}

@@ -1,0 +1,162 @@
+//! Stage 2: turn input triangles into the solver's patches, in a normalized frame.
+//!
+//! The solver never sees the scene's own units: positions are moved to a frame centred on the
+//! scene's bounds and scaled to unit diameter (`unit_from_world`), and emission is divided by its
+//! largest value. Both are exact symmetries of the model (radiance is scale invariant and the
+//! equations are linear in E), so the answer does not depend on where, how large or how bright
+//! the scene is, and f32 storage neither overflows nor underflows.
+
+use glam::DVec3;
+
+use crate::geometry::{self, Tri};
+use crate::scene::Scene;
+
+/// The similarity that maps world coordinates to the solver's unit frame.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct UnitFrame {
+    /// World-space centre of the scene's bounds.
+    pub center: DVec3,
+    /// Multiply world lengths by this to get unit-frame lengths (1 / diameter).
+    pub scale: f64,
+}
+
+impl UnitFrame {
+    /// Unit-frame position of a world-space point.
+    pub fn unit_from_world(&self, p: DVec3) -> DVec3 {
+        (p - self.center) * self.scale
+    }
+
+    /// World-space position of a unit-frame point.
+    pub fn world_from_unit(&self, p: DVec3) -> DVec3 {
+        p / self.scale + self.center
+    }
+}
+
+/// The solver's elements: input triangles, optionally split so no edge exceeds `max_edge`.
+#[derive(Clone, Debug, Default)]
+pub struct Patches {
+    /// Corners in the unit frame, counter-clockwise = front.
+    pub corners: Vec<Tri>,
+    /// Unit normal (zero for degenerate patches).
+    pub normal: Vec<DVec3>,
+    /// Area in the unit frame.
+    pub area: Vec<f64>,
+    /// Centroid in the unit frame.
+    pub centroid: Vec<DVec3>,
+    /// Input triangle each patch comes from.
+    pub parent: Vec<u32>,
+    /// Albedo, RGB in [0, 1).
+    pub albedo: Vec<[f64; 3]>,
+    /// Emitted radiance divided by `emission_scale`, RGB.
+    pub emission: Vec<[f64; 3]>,
+    /// False for zero-area patches: they take no part in transport and keep B = E.
+    pub active: Vec<bool>,
+    /// World <-> unit frame map.
+    pub frame: UnitFrame,
+    /// The largest emitted radiance of the scene (1 when nothing emits); multiply B by it.
+    pub emission_scale: f64,
+    /// First patch of each input triangle; patches of triangle t are `first[t]..first[t + 1]`.
+    pub first: Vec<u32>,
+}
+
+impl Patches {
+    /// Number of patches.
+    pub fn len(&self) -> usize {
+        self.corners.len()
+    }
+
+    /// True when there are no patches.
+    pub fn is_empty(&self) -> bool {
+        self.corners.is_empty()
+    }
+
+    /// Appends one patch; `corners` in the unit frame.
+    pub fn push(&mut self, corners: Tri, parent: u32, albedo: [f64; 3], emission: [f64; 3], active: bool) {
+        let n = geometry::normal(&corners);
+        let active = active && n.is_some();
+        self.corners.push(corners);
+        self.normal.push(n.unwrap_or(DVec3::ZERO));
+        self.area.push(if active { geometry::area(&corners) } else { 0.0 });
+        self.centroid.push(geometry::centroid(&corners));
+        self.parent.push(parent);
+        self.albedo.push(albedo);
+        self.emission.push(emission);
+        self.active.push(active);
+    }
+
+    /// Per-input-triangle values from per-patch values: the area-weighted mean of each triangle's
+    /// patches (a triangle whose patches all have zero area takes its first patch's value).
+    pub fn to_input(&self, per_patch: &[[f64; 3]]) -> Vec<[f64; 3]> {
+        (0..self.first.len() - 1)
+            .map(|t| {
+                let range = self.first[t] as usize..self.first[t + 1] as usize;
+                let total: f64 = range.clone().map(|p| self.area[p]).sum();
+                if total > 0.0 {
+                    let mut acc = [0.0; 3];
+                    for p in range {
+                        for c in 0..3 {
+                            acc[c] += self.area[p] * per_patch[p][c];
+                        }
+                    }
+                    acc.map(|x| x / total)
+                } else {
+                    per_patch[range.start]
+                }
+            })
+            .collect()
+    }
+
+    /// Number of active (non-degenerate) patches.
+    pub fn active_count(&self) -> usize {
+        self.active.iter().filter(|&&a| a).count()
+    }
+}
+
+/// Builds the patches of a scene. Each input triangle whose longest edge exceeds `max_edge`
+/// (world units) is split into k*k congruent pieces, k = ceil(longest / max_edge).
+///
+/// Preconditions: the scene has at least one triangle and finite coordinates (as `load_obj`
+/// guarantees); a non-positive or non-finite `max_edge` means no splitting.
+pub fn build_patches(scene: &Scene, max_edge: Option<f64>) -> Patches {
+    let (lo, hi) = scene.bounds();
+    let diameter = (hi - lo).length();
+    let scale = if diameter > 0.0 && diameter.is_finite() {
+        1.0 / diameter
+    } else {
+        1.0
+    };
+    let frame = UnitFrame {
+        center: (lo + hi) * 0.5,
+        scale,
+    };
+    let emission_max = scene
+        .emission
+        .iter()
+        .flat_map(|e| e.iter().copied())
+        .fold(0.0f64, f64::max);
+    let emission_scale = if emission_max > 0.0 { emission_max } else { 1.0 };
+
+    let mut patches = Patches {
+        frame,
+        emission_scale,
+        ..Patches::default()
+    };
+    for t in 0..scene.len() {
+        patches.first.push(patches.len() as u32);
+        let world = scene.corners(t);
+        let unit: Tri = world.map(|p| frame.unit_from_world(p));
+        let emission = scene.emission[t].map(|e| e / emission_scale);
+        let active = !scene.is_degenerate(t);
+        let k = match max_edge {
+            Some(l) if l > 0.0 && l.is_finite() && active => {
+                (geometry::longest_edge(&world) / l).ceil().clamp(1.0, 1024.0) as usize
+            }
+            _ => 1,
+        };
+        for piece in geometry::subdivide(&unit, k) {
+            patches.push(piece, t as u32, scene.albedo[t], emission, active);
+        }
+    }
+    patches.first.push(patches.len() as u32);
+    patches
+}

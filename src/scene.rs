@@ -1,0 +1,483 @@
+//! Stage 1: load an OBJ+MTL scene into a flat list of input triangles with materials.
+//!
+//! Polygons are fan-triangulated in file order; a triangle's index is its position in that order,
+//! and this order is the contract for every per-triangle output. Positions are kept in f64 so that a
+//! scene translated far from the origin keeps its precision. Every line-level problem is reported as
+//! `file:line: message` before tobj ever sees the file (tobj 4.0.5 panics on some malformed lines).
+
+use std::path::{Path, PathBuf};
+
+use glam::DVec3;
+
+use crate::error::{Error, Result};
+
+/// Options that complete or override what the scene files say about materials.
+#[derive(Clone, Debug)]
+pub struct SceneOptions {
+    /// Grey albedo for triangles whose material has no `Kd` (or that have no material). In [0, 1).
+    pub default_albedo: f64,
+    /// The seed's emitter rule: a triangle whose three vertices all have y > this value emits.
+    pub emit_above: Option<f64>,
+    /// Radiance (W / (m^2 sr), grey) given to triangles selected by `emit_above`. >= 0.
+    pub emission: f64,
+}
+
+impl Default for SceneOptions {
+    fn default() -> Self {
+        SceneOptions {
+            default_albedo: 0.75,
+            emit_above: None,
+            emission: 1.0,
+        }
+    }
+}
+
+impl SceneOptions {
+    /// Checks the ranges: albedo in [0, 1), emission finite and >= 0, threshold finite.
+    pub fn validate(&self) -> Result<()> {
+        if !(self.default_albedo.is_finite() && (0.0..1.0).contains(&self.default_albedo)) {
+            return Err(Error::Parameter(format!(
+                "--albedo {} is outside [0, 1)",
+                self.default_albedo
+            )));
+        }
+        if !(self.emission.is_finite() && self.emission >= 0.0) {
+            return Err(Error::Parameter(format!(
+                "--emission {} must be finite and >= 0",
+                self.emission
+            )));
+        }
+        if let Some(y) = self.emit_above {
+            if !y.is_finite() {
+                return Err(Error::Parameter(format!("--emit-above {y} must be finite")));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A scene: input triangles in file order with per-triangle RGB albedo and emitted radiance.
+#[derive(Clone, Debug, Default)]
+pub struct Scene {
+    /// The file the scene came from (for messages); empty for scenes built in code.
+    pub path: PathBuf,
+    /// Vertex positions in the file's units and frame.
+    pub positions: Vec<DVec3>,
+    /// Input triangles, indices into `positions`, in file order (polygons fan-triangulated).
+    pub triangles: Vec<[u32; 3]>,
+    /// Per-triangle albedo, RGB, each in [0, 1).
+    pub albedo: Vec<[f64; 3]>,
+    /// Per-triangle emitted radiance, RGB, W / (m^2 sr), each >= 0.
+    pub emission: Vec<[f64; 3]>,
+    /// Non-fatal findings (missing MTL, no emitter, ...), one line each.
+    pub warnings: Vec<String>,
+}
+
+/// Largest `|sin|` of a triangle's corner angle below which it counts as degenerate (zero area).
+///
+/// Relative to the triangle's own edges, so it does not depend on the scene's scale: a sliver with
+/// aspect ratio 1e6 (sin ~ 1e-6) is a real triangle, three collinear points (sin ~ 1e-16) are not.
+pub const DEGENERATE_SIN: f64 = 1e-10;
+
+impl Scene {
+    /// Number of input triangles.
+    pub fn len(&self) -> usize {
+        self.triangles.len()
+    }
+
+    /// True when the scene has no triangles.
+    pub fn is_empty(&self) -> bool {
+        self.triangles.is_empty()
+    }
+
+    /// The three corners of input triangle `t`.
+    pub fn corners(&self, t: usize) -> [DVec3; 3] {
+        let [a, b, c] = self.triangles[t];
+        [
+            self.positions[a as usize],
+            self.positions[b as usize],
+            self.positions[c as usize],
+        ]
+    }
+
+    /// Area of input triangle `t` in the scene's units squared.
+    pub fn area(&self, t: usize) -> f64 {
+        let [a, b, c] = self.corners(t);
+        0.5 * (b - a).cross(c - a).length()
+    }
+
+    /// True when triangle `t` has (numerically) zero area; such triangles keep B = E.
+    pub fn is_degenerate(&self, t: usize) -> bool {
+        let [a, b, c] = self.corners(t);
+        let (e1, e2) = (b - a, c - a);
+        let cross = e1.cross(e2).length();
+        let scale = e1.length() * e2.length();
+        !(cross.is_finite() && cross > DEGENERATE_SIN * scale && cross > 0.0)
+    }
+
+    /// True when triangle `t` emits in any channel.
+    pub fn is_emitter(&self, t: usize) -> bool {
+        self.emission[t].iter().any(|&e| e > 0.0)
+    }
+
+    /// Axis-aligned bounds of all vertices used by triangles, as (min, max).
+    pub fn bounds(&self) -> (DVec3, DVec3) {
+        let mut lo = DVec3::splat(f64::INFINITY);
+        let mut hi = DVec3::splat(f64::NEG_INFINITY);
+        for tri in &self.triangles {
+            for &v in tri {
+                let p = self.positions[v as usize];
+                lo = lo.min(p);
+                hi = hi.max(p);
+            }
+        }
+        (lo, hi)
+    }
+
+    /// Builds a scene from triangles given in code (tests, generators); applies no options.
+    pub fn from_triangles(
+        corners: &[[DVec3; 3]],
+        albedo: &[[f64; 3]],
+        emission: &[[f64; 3]],
+    ) -> Scene {
+        let mut scene = Scene::default();
+        for (t, tri) in corners.iter().enumerate() {
+            let base = scene.positions.len() as u32;
+            scene.positions.extend_from_slice(tri);
+            scene.triangles.push([base, base + 1, base + 2]);
+            scene.albedo.push(albedo[t]);
+            scene.emission.push(emission[t]);
+        }
+        scene
+    }
+
+    /// Applies a uniform scale then a translation to every vertex (tests of invariance).
+    pub fn transformed(&self, scale: f64, offset: DVec3) -> Scene {
+        let mut s = self.clone();
+        for p in &mut s.positions {
+            *p = *p * scale + offset;
+        }
+        s
+    }
+
+    /// Number of emitting triangles.
+    pub fn emitter_count(&self) -> usize {
+        (0..self.len()).filter(|&t| self.is_emitter(t)).count()
+    }
+
+    /// Number of degenerate (zero-area) triangles.
+    pub fn degenerate_count(&self) -> usize {
+        (0..self.len()).filter(|&t| self.is_degenerate(t)).count()
+    }
+}
+
+/// Reads an OBJ file (and the MTL files it names) into a [`Scene`].
+///
+/// Errors name the file and, where known, the line: missing or unreadable file, empty or binary
+/// file, malformed numbers, NaN or infinite coordinates, face index out of range, colour lines with
+/// fewer than three numbers, albedo outside [0, 1), negative emission, no non-degenerate triangle.
+/// A missing MTL file and a scene without emitters are warnings (in `Scene::warnings`).
+pub fn load_obj(path: &Path, options: &SceneOptions) -> Result<Scene> {
+    options.validate()?;
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let text = as_text(path, &bytes)?;
+    let obj_scan = scan_obj(path, text)?;
+
+    // Materials: every mtllib is checked line by line first (tobj panics on short colour lines),
+    // then tobj parses it and resolves `usemtl` names itself.
+    let mut warnings = Vec::new();
+    let base_dir = path.parent().unwrap_or(Path::new("."));
+    let mut mtl_texts: std::collections::HashMap<String, String> = Default::default();
+    for (line, name) in &obj_scan.mtllibs {
+        let mtl_path = base_dir.join(name);
+        match std::fs::read(&mtl_path) {
+            Ok(mtl_bytes) => {
+                let mtl_text = as_text(&mtl_path, &mtl_bytes)?;
+                scan_mtl(&mtl_path, mtl_text)?;
+                mtl_texts.insert(name.clone(), mtl_text.to_string());
+            }
+            Err(_) => warnings.push(format!(
+                "{}:{}: material file {} not found; using --albedo for its materials",
+                path.display(),
+                line,
+                mtl_path.display()
+            )),
+        }
+    }
+
+    // Geometry through tobj: fan triangulation, models in file order.
+    let load_options = tobj::LoadOptions {
+        triangulate: true,
+        single_index: false,
+        ignore_points: true,
+        ignore_lines: true,
+    };
+    let (models, materials) = tobj::load_obj_buf(&mut text.as_bytes(), &load_options, |p| {
+        match mtl_texts.get(p.to_string_lossy().trim()) {
+            Some(mtl_text) => tobj::load_mtl_buf(&mut mtl_text.as_bytes()),
+            None => Err(tobj::LoadError::OpenFileFailed),
+        }
+    })
+    .map_err(|e| Error::Scene {
+        path: path.to_path_buf(),
+        message: format!("cannot parse OBJ: {e}"),
+    })?;
+    let materials = materials.unwrap_or_default();
+
+    let mut scene = Scene {
+        path: path.to_path_buf(),
+        ..Scene::default()
+    };
+    let default_albedo = [options.default_albedo; 3];
+    for model in &models {
+        let mesh = &model.mesh;
+        let base = scene.positions.len() as u32;
+        for p in mesh.positions.chunks_exact(3) {
+            scene.positions.push(DVec3::new(p[0], p[1], p[2]));
+        }
+        let material = mesh.material_id.and_then(|i| materials.get(i));
+        let albedo = material
+            .and_then(|m| m.diffuse)
+            .map(|d| [d[0], d[1], d[2]])
+            .unwrap_or(default_albedo);
+        let emission = material
+            .and_then(|m| m.emissive)
+            .map(|e| [e[0], e[1], e[2]])
+            .unwrap_or([0.0; 3]);
+        for tri in mesh.indices.chunks_exact(3) {
+            scene
+                .triangles
+                .push([base + tri[0], base + tri[1], base + tri[2]]);
+            scene.albedo.push(albedo);
+            scene.emission.push(emission);
+        }
+    }
+    if scene.triangles.len() != obj_scan.triangle_count {
+        return Err(Error::Scene {
+            path: path.to_path_buf(),
+            message: format!(
+                "internal: read {} triangles but the file has {}",
+                scene.triangles.len(),
+                obj_scan.triangle_count
+            ),
+        });
+    }
+
+    if let Some(y) = options.emit_above {
+        for t in 0..scene.len() {
+            if scene.corners(t).iter().all(|p| p.y > y) {
+                scene.emission[t] = [options.emission; 3];
+            }
+        }
+    }
+
+    if scene.is_empty() {
+        return Err(Error::Scene {
+            path: path.to_path_buf(),
+            message: "no triangles (the file has no faces)".into(),
+        });
+    }
+    if scene.degenerate_count() == scene.len() {
+        return Err(Error::Scene {
+            path: path.to_path_buf(),
+            message: format!(
+                "no non-degenerate triangle among {} (all have zero area)",
+                scene.len()
+            ),
+        });
+    }
+    if scene.emitter_count() == 0 {
+        warnings.push(format!(
+            "{}: no emitting triangle (no Ke in materials, no --emit-above match); the answer is all zero",
+            path.display()
+        ));
+    }
+    scene.warnings = warnings;
+    Ok(scene)
+}
+
+/// Rejects binary and non-UTF-8 content with a one-line error.
+fn as_text<'a>(path: &Path, bytes: &'a [u8]) -> Result<&'a str> {
+    if bytes.contains(&0) {
+        return Err(Error::Scene {
+            path: path.to_path_buf(),
+            message: "binary file (contains NUL bytes), expected text".into(),
+        });
+    }
+    std::str::from_utf8(bytes).map_err(|e| {
+        let line = bytes[..e.valid_up_to()].iter().filter(|&&b| b == b'\n').count() + 1;
+        Error::Parse {
+            path: path.to_path_buf(),
+            line,
+            message: "not valid UTF-8 text (binary file?)".into(),
+        }
+    })
+}
+
+/// What the line-level scan of an OBJ file learned.
+struct ObjScan {
+    mtllibs: Vec<(usize, String)>,
+    triangle_count: usize,
+}
+
+fn parse_err(path: &Path, line: usize, message: impl Into<String>) -> Error {
+    Error::Parse {
+        path: path.to_path_buf(),
+        line,
+        message: message.into(),
+    }
+}
+
+/// Checks every `v` and `f` line of an OBJ file, so tobj only ever sees well-formed input.
+fn scan_obj(path: &Path, text: &str) -> Result<ObjScan> {
+    let vertex_total = text
+        .lines()
+        .filter(|l| l.trim_start().starts_with("v ") || l.trim_start().starts_with("v\t"))
+        .count();
+    let mut vertices_so_far = 0usize;
+    let mut scan = ObjScan {
+        mtllibs: Vec::new(),
+        triangle_count: 0,
+    };
+    for (i, raw) in text.lines().enumerate() {
+        let line_no = i + 1;
+        let line = raw.split('#').next().unwrap_or("").trim();
+        let mut words = line.split_whitespace();
+        match words.next() {
+            Some("v") => {
+                let nums: Vec<&str> = words.collect();
+                if nums.len() < 3 {
+                    return Err(parse_err(path, line_no, "vertex needs three coordinates"));
+                }
+                for w in &nums[..3] {
+                    let x: f64 = w.parse().map_err(|_| {
+                        parse_err(path, line_no, format!("malformed number '{w}' in vertex"))
+                    })?;
+                    if !x.is_finite() {
+                        return Err(parse_err(
+                            path,
+                            line_no,
+                            format!("vertex coordinate '{w}' is not finite"),
+                        ));
+                    }
+                }
+                vertices_so_far += 1;
+            }
+            Some("f") => {
+                let refs: Vec<&str> = words.collect();
+                if refs.len() < 3 {
+                    return Err(parse_err(path, line_no, "face needs at least three vertices"));
+                }
+                for r in &refs {
+                    let first = r.split('/').next().unwrap_or("");
+                    let idx: i64 = first.parse().map_err(|_| {
+                        parse_err(path, line_no, format!("malformed face index '{r}'"))
+                    })?;
+                    let resolved = if idx > 0 {
+                        idx
+                    } else {
+                        vertices_so_far as i64 + idx + 1
+                    };
+                    if idx == 0 || resolved < 1 || resolved > vertex_total as i64 {
+                        return Err(parse_err(
+                            path,
+                            line_no,
+                            format!(
+                                "face index {idx} out of range (the file has {vertex_total} vertices)"
+                            ),
+                        ));
+                    }
+                    // tobj rejects texture/normal references it cannot resolve; we only use
+                    // positions, so those are checked for syntax only.
+                    for part in r.split('/').skip(1) {
+                        if !part.is_empty() && part.parse::<i64>().is_err() {
+                            return Err(parse_err(
+                                path,
+                                line_no,
+                                format!("malformed face index '{r}'"),
+                            ));
+                        }
+                    }
+                }
+                scan.triangle_count += refs.len() - 2;
+            }
+            Some("mtllib") => {
+                let name = line["mtllib".len()..].trim();
+                if !name.is_empty() {
+                    scan.mtllibs.push((line_no, name.to_string()));
+                }
+            }
+            Some("usemtl") if line["usemtl".len()..].trim().is_empty() => {
+                return Err(parse_err(path, line_no, "usemtl needs a material name"));
+            }
+            _ => {}
+        }
+    }
+    if vertex_total == 0 || scan.triangle_count == 0 {
+        return Err(Error::Scene {
+            path: path.to_path_buf(),
+            message: "empty scene: no vertices or no faces".into(),
+        });
+    }
+    Ok(scan)
+}
+
+/// Checks every colour line of an MTL file (tobj 4.0.5 panics on `Kd 0.5`) and the physical ranges.
+fn scan_mtl(path: &Path, text: &str) -> Result<()> {
+    for (i, raw) in text.lines().enumerate() {
+        let line_no = i + 1;
+        let line = raw.split('#').next().unwrap_or("").trim();
+        let mut words = line.split_whitespace();
+        let Some(key) = words.next() else { continue };
+        if !matches!(key, "Ka" | "Kd" | "Ks" | "Ke" | "Tf") {
+            continue;
+        }
+        let nums: Vec<&str> = words.collect();
+        if nums.first().is_some_and(|w| w.parse::<f64>().is_err()) {
+            // `Kd spectral file.rfl` / `Ka xyz ...`: a form we do not support.
+            return Err(parse_err(
+                path,
+                line_no,
+                format!("{key} must be three numbers (r g b)"),
+            ));
+        }
+        if nums.len() < 3 {
+            return Err(parse_err(
+                path,
+                line_no,
+                format!("{key} needs three numbers (r g b), found {}", nums.len()),
+            ));
+        }
+        let mut values = [0.0f64; 3];
+        for (k, w) in nums[..3].iter().enumerate() {
+            let x: f64 = w
+                .parse()
+                .map_err(|_| parse_err(path, line_no, format!("malformed number '{w}' in {key}")))?;
+            if !x.is_finite() {
+                return Err(parse_err(path, line_no, format!("{key} value '{w}' is not finite")));
+            }
+            values[k] = x;
+        }
+        if key == "Kd" && values.iter().any(|&x| !(0.0..1.0).contains(&x)) {
+            return Err(parse_err(
+                path,
+                line_no,
+                format!(
+                    "albedo Kd {} {} {} is outside [0, 1)",
+                    values[0], values[1], values[2]
+                ),
+            ));
+        }
+        if key == "Ke" && values.iter().any(|&x| x < 0.0) {
+            return Err(parse_err(
+                path,
+                line_no,
+                format!(
+                    "negative emission Ke {} {} {}",
+                    values[0], values[1], values[2]
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
