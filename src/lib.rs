@@ -9,5 +9,6 @@ pub mod error;
 pub mod geometry;
 pub mod mesh;
 pub mod scene;
+pub mod solution;
 
 pub use error::{Error, Result};

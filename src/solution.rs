@@ -1,0 +1,96 @@
+//! What every solver returns: outgoing radiance per patch and per input triangle, plus statistics.
+
+use serde::Serialize;
+
+use crate::mesh::Patches;
+
+/// Convergence and health figures of one solve.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct SolveStats {
+    /// Iterations performed (for the path tracer: samples per patch).
+    pub iterations: usize,
+    /// Final relative residual (L1, area weighted) of the last iteration; 0 for the path tracer.
+    pub residual: f64,
+    /// True when the residual went under the tolerance before the iteration cap.
+    pub converged: bool,
+    /// Area-weighted mass of negative radiance before clamping, relative to the positive mass
+    /// (sum a_t max(0, -B_t) / sum a_t max(0, B_t), mean over RGB).
+    pub negative_fraction: f64,
+    /// Number of patches whose radiance was negative in some channel (before clamping).
+    pub negative_patches: usize,
+    /// Largest receiver form-factor row sum (<= 1 up to discretization; 1 in a closed enclosure).
+    pub max_row_sum: f64,
+    /// Transport links (dense: ordered patch pairs that exchange anything).
+    pub links: u64,
+    /// Bytes held by the solver's main arrays at their peak.
+    pub solver_bytes: u64,
+}
+
+/// A solved scene.
+#[derive(Clone, Debug, Default)]
+pub struct Solution {
+    /// Outgoing radiance B per patch, RGB, in the scene's own radiance units.
+    pub patch_radiance: Vec<[f64; 3]>,
+    /// Outgoing radiance B per input triangle (area-weighted mean of its patches), in input order.
+    pub triangle_radiance: Vec<[f64; 3]>,
+    /// How the solve went.
+    pub stats: SolveStats,
+}
+
+impl Solution {
+    /// Builds a solution from per-patch radiance given in the patches' normalized emission units.
+    pub fn from_normalized(patches: &Patches, normalized: &[[f64; 3]], stats: SolveStats) -> Solution {
+        let patch_radiance: Vec<[f64; 3]> = normalized
+            .iter()
+            .map(|b| b.map(|x| sanitize(x * patches.emission_scale)))
+            .collect();
+        let triangle_radiance = patches.to_input(&patch_radiance);
+        Solution {
+            patch_radiance,
+            triangle_radiance,
+            stats,
+        }
+    }
+}
+
+/// Replaces a non-finite value by 0 so that no NaN or infinity ever reaches an output.
+pub fn sanitize(x: f64) -> f64 {
+    if x.is_finite() {
+        x
+    } else {
+        0.0
+    }
+}
+
+/// The design note's error: area-weighted relative L1 error over non-emissive triangles, mean
+/// over RGB channels, of `estimate` against `truth` (per input triangle). Channels where the
+/// truth is all zero are skipped; returns 0 when nothing is lit.
+pub fn relative_error(
+    areas: &[f64],
+    emissive: &[bool],
+    estimate: &[[f64; 3]],
+    truth: &[[f64; 3]],
+) -> f64 {
+    let mut sum = 0.0;
+    let mut channels = 0;
+    for c in 0..3 {
+        let mut num = 0.0;
+        let mut den = 0.0;
+        for t in 0..areas.len() {
+            if emissive[t] {
+                continue;
+            }
+            num += areas[t] * (estimate[t][c] - truth[t][c]).abs();
+            den += areas[t] * truth[t][c];
+        }
+        if den > 0.0 {
+            sum += num / den;
+            channels += 1;
+        }
+    }
+    if channels == 0 {
+        0.0
+    } else {
+        sum / channels as f64
+    }
+}
