@@ -8,6 +8,7 @@ pub mod bins;
 pub mod error;
 pub mod geometry;
 pub mod mesh;
+pub mod progress;
 pub mod scene;
 pub mod solution;
 
