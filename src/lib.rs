@@ -5,11 +5,18 @@
 //! [`output`]. [`reference`] is an independent path tracer used as ground truth.
 
 pub mod bins;
+pub mod dense;
 pub mod error;
 pub mod geometry;
 pub mod mesh;
+pub mod output;
 pub mod progress;
+pub mod reference;
+pub mod render;
 pub mod scene;
+pub mod scenes;
 pub mod solution;
+pub mod solve;
+pub mod transport;
 
 pub use error::{Error, Result};

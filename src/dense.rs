@@ -1,0 +1,146 @@
+//! The dense antiradiance solver: every ordered pair of patches is a link.
+//!
+//! Far pairs are streamed: their couplings are recomputed in every sweep, receiver by receiver, so
+//! nothing of size n^2 is ever stored and a 20k-triangle scene runs on any machine. Near pairs
+//! ([`is_near`]), whose couplings need quadrature, are few per receiver: they
+//! are computed once and cached. It is the oracle for the
+//! hierarchical solver (which uses the very same [`couple`] on its finest links).
+
+use rayon::prelude::*;
+
+use crate::bins::Bins;
+use crate::mesh::Patches;
+use crate::progress::Progress;
+use crate::solution::{SolveStats, Solution};
+use crate::solve::{finish, relative_change, Convergence, SolverOptions};
+use crate::transport::{couple, is_near, Coupling, Entry, PatchGeom};
+
+/// Solves the scene with the dense solver. Preconditions: `options.validate()` passed.
+///
+/// Jacobi iteration: each sweep computes every receiver's B and antiradiance bins from the
+/// previous sweep's values, until the estimated remaining error is under `options.tol` or the
+/// iteration cap is reached (then `stats.converged` is false).
+pub fn solve_dense(patches: &Patches, options: &SolverOptions, progress: &Progress) -> Solution {
+    let bins = Bins::new(options.bins);
+    let nb = bins.len();
+    let n = patches.len();
+    let params = options.coupling();
+    let geoms: Vec<Option<PatchGeom>> = (0..n)
+        .map(|p| patches.active[p].then(|| PatchGeom::new(patches.corners[p], patches.normal[p])))
+        .collect();
+    let active: Vec<usize> = (0..n).filter(|&p| patches.active[p]).collect();
+
+    let emission = &patches.emission;
+    let mut radiance: Vec<[f64; 3]> = emission.clone();
+    let mut anti = vec![[0.0f32; 3]; n * nb];
+    let mut next_radiance = radiance.clone();
+    let mut next_anti = anti.clone();
+    let mut stats = SolveStats {
+        solver_bytes: ((anti.len() * 2) * 12 + n * 48 * 2) as u64,
+        ..SolveStats::default()
+    };
+    let mut convergence = Convergence::default();
+
+    // Near pairs: computed once, kept per receiver as (sender, entries).
+    let near: Vec<Vec<(u32, Coupling)>> = geoms
+        .par_iter()
+        .enumerate()
+        .map(|(r, rg)| {
+            let Some(rg) = rg else { return Vec::new() };
+            let mut list = Vec::new();
+            let mut coupling = Coupling::new();
+            for &s in &active {
+                let sg = geoms[s].as_ref().expect("active patches have geometry");
+                if s == r || !is_near(rg, sg, &bins, &params) {
+                    continue;
+                }
+                couple(rg, sg, &bins, &params, &mut coupling);
+                if !coupling.is_empty() {
+                    list.push((s as u32, coupling.clone()));
+                }
+            }
+            list
+        })
+        .collect();
+    stats.solver_bytes += near
+        .iter()
+        .map(|l| (l.len() * std::mem::size_of::<(u32, Coupling)>()) as u64)
+        .sum::<u64>();
+
+    for iteration in 1..=options.max_iterations {
+        // One Jacobi sweep: every receiver gathers from every active sender.
+        let row_sums: Vec<(f64, u64)> = next_radiance
+            .par_iter_mut()
+            .zip(next_anti.par_chunks_mut(nb))
+            .enumerate()
+            .map(|(r, (b_out, a_out))| {
+                let Some(rg) = &geoms[r] else {
+                    *b_out = emission[r];
+                    a_out.fill([0.0; 3]);
+                    return (0.0, 0);
+                };
+                let mut h = [0.0f64; 3];
+                let mut a_acc = vec![[0.0f64; 3]; nb];
+                let mut coupling = Coupling::new();
+                let mut row = 0.0;
+                let mut links = 0u64;
+                let mut gather = |s: usize, entries: &[Entry]| {
+                    links += 1;
+                    let b_s = radiance[s];
+                    for e in entries {
+                        let a_s = anti[s * nb + e.bin as usize];
+                        row += if params.two_sided { e.f_a } else { e.f_a + e.f_b } as f64;
+                        for c in 0..3 {
+                            let a = if options.antiradiance { a_s[c] as f64 } else { 0.0 };
+                            h[c] += e.f_b as f64 * b_s[c] - e.f_a as f64 * a;
+                            a_acc[e.bin as usize][c] += e.o_b as f64 * b_s[c] - e.o_a as f64 * a;
+                        }
+                    }
+                };
+                for (s, entries) in &near[r] {
+                    gather(*s as usize, entries);
+                }
+                for &s in &active {
+                    let sg = geoms[s].as_ref().expect("active patches have geometry");
+                    if s == r || is_near(rg, sg, &bins, &params) {
+                        continue;
+                    }
+                    couple(rg, sg, &bins, &params, &mut coupling);
+                    if !coupling.is_empty() {
+                        gather(s, &coupling);
+                    }
+                }
+                for c in 0..3 {
+                    b_out[c] = emission[r][c] + patches.albedo[r][c] * h[c];
+                }
+                for (dst, src) in a_out.iter_mut().zip(&a_acc) {
+                    *dst = if options.antiradiance {
+                        src.map(|x| x as f32)
+                    } else {
+                        [0.0; 3]
+                    };
+                }
+                (row, links)
+            })
+            .collect();
+        if iteration == 1 {
+            stats.max_row_sum = row_sums.iter().map(|r| r.0).fold(0.0, f64::max);
+            stats.links = row_sums.iter().map(|r| r.1).sum();
+        }
+
+        let change = relative_change(patches, &radiance, &next_radiance);
+        std::mem::swap(&mut radiance, &mut next_radiance);
+        std::mem::swap(&mut anti, &mut next_anti);
+        stats.iterations = iteration;
+        progress.inc(1);
+        progress.message(format!("residual {change:.2e}"));
+        // The first sweeps only propagate emission; do not stop before light has bounced once
+        // and antiradiance has had a sweep to cancel it.
+        if convergence.update(change, options.tol) && iteration >= 3 {
+            stats.converged = true;
+            break;
+        }
+    }
+    stats.residual = convergence.residual;
+    finish(patches, radiance, stats, options.clamp_negative)
+}

@@ -1,0 +1,203 @@
+//! Solver parameters shared by the dense and hierarchical solvers, with named presets, and the
+//! pieces of the iteration they share (residuals, convergence, finishing a solution).
+
+use serde::Serialize;
+
+use crate::error::{Error, Result};
+use crate::mesh::Patches;
+use crate::solution::{sanitize, SolveStats, Solution};
+use crate::transport::CouplingParams;
+
+/// Parameters of an antiradiance solve.
+#[derive(Clone, Debug, Serialize)]
+pub struct SolverOptions {
+    /// Octahedral bins per side (R x R bins over the sphere). 4..16; 8 (64 bins) by default.
+    /// More bins sharpen shadows from antiradiance and cost memory and time linearly in R^2.
+    pub bins: usize,
+    /// Stop when the estimated remaining relative error of B is under this. 1e-4..1e-2; 1e-3.
+    pub tol: f64,
+    /// Iteration cap; the report says when it was hit. Default 500.
+    pub max_iterations: usize,
+    /// Antiradiance from both sides of every surface (open scenes with back-lit one-sided
+    /// surfaces). Default false: front-only, exact for closed, consistently oriented objects.
+    pub two_sided: bool,
+    /// Propagate antiradiance at all. Off gives unoccluded radiosity (light through walls); only
+    /// useful to show what antiradiance does.
+    pub antiradiance: bool,
+    /// Clamp negative radiance to 0 in the result (the negative mass is reported either way).
+    pub clamp_negative: bool,
+    /// Receiver quadrature points per side for near pairs (see [`CouplingParams`]).
+    pub near_quadrature: usize,
+    /// Link refinement threshold of the hierarchical solver (see `links`); smaller is finer.
+    pub epsilon: f64,
+}
+
+impl Default for SolverOptions {
+    fn default() -> Self {
+        SolverOptions::default_preset()
+    }
+}
+
+impl SolverOptions {
+    /// Balanced speed and accuracy: 8 x 8 bins, epsilon 0.5 (the default).
+    pub fn default_preset() -> Self {
+        SolverOptions {
+            bins: 8,
+            tol: 1e-3,
+            max_iterations: 500,
+            two_sided: false,
+            antiradiance: true,
+            clamp_negative: true,
+            near_quadrature: 6,
+            epsilon: 0.5,
+        }
+    }
+
+    /// Fastest: 6 x 6 bins, coarse links, looser tolerance.
+    pub fn fast() -> Self {
+        SolverOptions {
+            bins: 6,
+            tol: 3e-3,
+            epsilon: 1.0,
+            near_quadrature: 4,
+            ..SolverOptions::default_preset()
+        }
+    }
+
+    /// Most accurate: 12 x 12 bins, fine links, tight tolerance.
+    pub fn accurate() -> Self {
+        SolverOptions {
+            bins: 12,
+            tol: 3e-4,
+            epsilon: 0.25,
+            ..SolverOptions::default_preset()
+        }
+    }
+
+    /// A preset by name: `fast`, `default` or `accurate`.
+    pub fn preset(name: &str) -> Result<Self> {
+        match name {
+            "fast" => Ok(Self::fast()),
+            "default" => Ok(Self::default_preset()),
+            "accurate" => Ok(Self::accurate()),
+            other => Err(Error::Parameter(format!(
+                "unknown preset '{other}' (expected fast, default or accurate)"
+            ))),
+        }
+    }
+
+    /// Checks every field's range.
+    pub fn validate(&self) -> Result<()> {
+        if !(1..=64).contains(&self.bins) {
+            return Err(Error::Parameter(format!("--bins {} outside 1..=64", self.bins)));
+        }
+        if !(self.tol > 0.0 && self.tol < 1.0) {
+            return Err(Error::Parameter(format!("--tol {} outside (0, 1)", self.tol)));
+        }
+        if self.max_iterations == 0 {
+            return Err(Error::Parameter("--max-iterations must be at least 1".into()));
+        }
+        if !(1..=16).contains(&self.near_quadrature) {
+            return Err(Error::Parameter(format!(
+                "near quadrature {} outside 1..=16",
+                self.near_quadrature
+            )));
+        }
+        if !(self.epsilon > 0.0 && self.epsilon.is_finite()) {
+            return Err(Error::Parameter(format!("--epsilon {} must be > 0", self.epsilon)));
+        }
+        Ok(())
+    }
+
+    /// The coupling parameters these options imply.
+    pub fn coupling(&self) -> CouplingParams {
+        CouplingParams {
+            two_sided: self.two_sided,
+            near_quadrature: self.near_quadrature,
+            ..CouplingParams::default()
+        }
+    }
+}
+
+/// Tracks residuals across iterations and decides convergence.
+///
+/// The residual r_k = |B_k - B_(k-1)| / |B_k| underestimates the remaining error when the
+/// iteration contracts slowly (albedo near 1): the remaining error is about r_k q / (1 - q) with
+/// q the contraction ratio r_k / r_(k-1). Convergence is declared on that estimate.
+#[derive(Clone, Debug, Default)]
+pub struct Convergence {
+    previous: Option<f64>,
+    /// Last residual seen.
+    pub residual: f64,
+    /// Last estimate of the remaining relative error.
+    pub error_estimate: f64,
+}
+
+impl Convergence {
+    /// Records a residual; returns true when the estimated remaining error is under `tol`.
+    pub fn update(&mut self, residual: f64, tol: f64) -> bool {
+        self.residual = residual;
+        let q = match self.previous {
+            Some(p) if p > 0.0 => (residual / p).min(0.9999),
+            _ => 0.9,
+        };
+        self.previous = Some(residual);
+        self.error_estimate = if residual == 0.0 {
+            0.0
+        } else {
+            residual * q.max(0.0) / (1.0 - q.max(0.0)) + residual
+        };
+        self.error_estimate < tol
+    }
+}
+
+/// Area-weighted relative L1 change between two radiance vectors.
+pub fn relative_change(patches: &Patches, old: &[[f64; 3]], new: &[[f64; 3]]) -> f64 {
+    let mut num = 0.0;
+    let mut den = 0.0;
+    for p in 0..patches.len() {
+        let a = patches.area[p];
+        for c in 0..3 {
+            num += a * (new[p][c] - old[p][c]).abs();
+            den += a * new[p][c].abs();
+        }
+    }
+    if den > 0.0 {
+        num / den
+    } else {
+        0.0
+    }
+}
+
+/// Turns normalized per-patch radiance into a [`Solution`]: measures and optionally clamps
+/// negative radiance, removes non-finite values, scales back to the scene's units.
+pub fn finish(
+    patches: &Patches,
+    mut radiance: Vec<[f64; 3]>,
+    mut stats: SolveStats,
+    clamp_negative: bool,
+) -> Solution {
+    let mut negative = 0.0;
+    let mut positive = 0.0;
+    let mut negative_patches = 0;
+    for (p, b) in radiance.iter_mut().enumerate() {
+        let a = patches.area[p];
+        let mut neg = false;
+        for x in b.iter_mut() {
+            *x = sanitize(*x);
+            if *x < 0.0 {
+                negative += a * -*x;
+                neg = true;
+                if clamp_negative {
+                    *x = 0.0;
+                }
+            } else {
+                positive += a * *x;
+            }
+        }
+        negative_patches += neg as usize;
+    }
+    stats.negative_fraction = if positive > 0.0 { negative / positive } else { 0.0 };
+    stats.negative_patches = negative_patches;
+    Solution::from_normalized(patches, &radiance, stats)
+}

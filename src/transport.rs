@@ -1,0 +1,418 @@
+//! Stage 3: the coupling of one sender patch to one receiver patch, shared by every solver.
+//!
+//! A coupling is a short list of [`Entry`] values, one per direction bin the sender covers as seen
+//! from the receiver. With `N_s(w) = B_s [n_s . w > 0] - A_s[bin(w)]` the net radiance leaving the
+//! sender towards the receiver, the receiver's updates are
+//!
+//! ```text
+//! B_r        = E_r + rho_r * sum_entries (f_b * B_s - f_a * A_s[bin])
+//! A_r[bin]  +=                 (o_b * B_s - o_a * A_s[bin])
+//! ```
+//!
+//! `f` is the (unoccluded) form factor from r to the part of s that lies in that bin, integrated
+//! over r with analytic point-to-triangle form factors; `o` is the solid angle of that part seen
+//! from r divided by the bin's solid angle (capped at 1 per receiver point: no amplification).
+//! The `_b` weights only count receiver points in front of the sender (which sees its B); the `_a`
+//! weights count every receiver point (antiradiance leaves both sides of the sender).
+
+use glam::DVec3;
+use smallvec::SmallVec;
+
+use crate::bins::Bins;
+use crate::geometry::{self, Poly, Tri, PLANE_EPS};
+
+/// One bin's share of a sender -> receiver coupling.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Entry {
+    /// Direction bin of travel (from sender to receiver).
+    pub bin: u16,
+    /// Form factor weight of the sender's B (receiver points that see the sender's front).
+    pub f_b: f32,
+    /// Form factor weight of the sender's antiradiance in `bin`.
+    pub f_a: f32,
+    /// Antiradiance weight of the sender's B: solid angle over bin solid angle.
+    pub o_b: f32,
+    /// Antiradiance weight of the sender's antiradiance in `bin`.
+    pub o_a: f32,
+}
+
+/// The entries of one coupling; most far pairs need one, near pairs a handful.
+pub type Coupling = SmallVec<[Entry; 4]>;
+
+/// Parameters of the coupling computation.
+#[derive(Clone, Copy, Debug)]
+pub struct CouplingParams {
+    /// Create antiradiance from light arriving at either side (full sphere) instead of the front
+    /// only. Needed for open scenes where a one-sided surface is lit from behind.
+    pub two_sided: bool,
+    /// Receiver quadrature (points per side) for the nearest pairs; 1..=8, default 6.
+    pub near_quadrature: usize,
+    /// Largest share of a bin's solid angle one sender piece may have before it is split further;
+    /// smaller spreads near senders more finely over bins. Default 0.5.
+    pub piece_fraction: f64,
+}
+
+impl Default for CouplingParams {
+    fn default() -> Self {
+        CouplingParams {
+            two_sided: false,
+            near_quadrature: 6,
+            piece_fraction: 0.5,
+        }
+    }
+}
+
+/// Geometry of one patch as the coupling needs it.
+#[derive(Clone, Copy, Debug)]
+pub struct PatchGeom {
+    /// Corners, counter-clockwise = front.
+    pub corners: Tri,
+    /// Unit normal.
+    pub normal: DVec3,
+    /// Centroid.
+    pub centroid: DVec3,
+    /// Longest edge.
+    pub size: f64,
+    /// Radius of the bounding sphere about the centroid.
+    pub radius: f64,
+    /// Area.
+    pub area: f64,
+}
+
+impl PatchGeom {
+    /// Gathers the geometry of a triangle with a known unit normal.
+    pub fn new(corners: Tri, normal: DVec3) -> PatchGeom {
+        let centroid = geometry::centroid(&corners);
+        PatchGeom {
+            corners,
+            normal,
+            centroid,
+            size: geometry::longest_edge(&corners),
+            radius: corners
+                .iter()
+                .map(|c| (*c - centroid).length())
+                .fold(0.0, f64::max),
+            area: geometry::area(&corners),
+        }
+    }
+}
+
+/// Distance over receiver size above which one receiver point suffices.
+pub const FAR_RATIO: f64 = 6.0;
+
+/// Separation of a pair as the receiver's quadrature sees it: the distance from the receiver's
+/// centroid to the sender's bounding sphere, over the receiver's size (longest edge).
+pub fn separation(r: &PatchGeom, s: &PatchGeom) -> f64 {
+    let gap = (r.centroid - s.centroid).length() - s.radius;
+    gap.max(0.0) / r.size.max(f64::MIN_POSITIVE)
+}
+
+/// True when the coupling of `s` to `r` needs more than one receiver point or more than one
+/// sender piece (and so costs much more than a far pair): what the dense solver caches.
+pub fn is_near(r: &PatchGeom, s: &PatchGeom, bins: &Bins, params: &CouplingParams) -> bool {
+    let gap = ((r.centroid - s.centroid).length() - s.radius).max(0.0);
+    if gap <= FAR_RATIO * r.size {
+        return true;
+    }
+    let omega_estimate = s.area / (gap * gap);
+    omega_estimate > params.piece_fraction * bins.min_solid_angle
+}
+
+/// Receiver points per side for a pair of the given [`separation`].
+fn receiver_quadrature(ratio: f64, near: usize) -> usize {
+    if ratio > FAR_RATIO {
+        1
+    } else if ratio > 3.0 {
+        2.min(near)
+    } else if ratio > 1.5 {
+        3.min(near)
+    } else if ratio > 0.6 {
+        4.min(near)
+    } else {
+        near
+    }
+}
+
+/// Per-bin accumulator of one receiver point: (bin, form factor, solid angle).
+type PointBins = SmallVec<[(u16, f64, f64); 8]>;
+
+fn add_point_bin(acc: &mut PointBins, bin: u16, f: f64, omega: f64) {
+    if let Some(e) = acc.iter_mut().find(|e| e.0 == bin) {
+        e.1 += f;
+        e.2 += omega;
+    } else {
+        acc.push((bin, f, omega));
+    }
+}
+
+/// Spreads one sender part (a triangle clipped to one side of the receiver's plane) seen from `x`
+/// over the bins it covers, splitting it into pieces of at most `piece_fraction` of the smallest
+/// bin's solid angle (at most 8 x 8 pieces). `with_ff`: also accumulate the form factor.
+fn spread_part(
+    x: DVec3,
+    n_x: DVec3,
+    part: &Tri,
+    with_ff: bool,
+    bins: &Bins,
+    params: &CouplingParams,
+    acc: &mut PointBins,
+) {
+    let omega = geometry::solid_angle(x, part);
+    if !(omega > 0.0) {
+        return;
+    }
+    let pieces_needed = omega / (params.piece_fraction * bins.min_solid_angle);
+    let m = if pieces_needed <= 1.0 {
+        1
+    } else {
+        (pieces_needed.sqrt().ceil() as usize).min(8)
+    };
+    for piece in geometry::subdivide(part, m) {
+        let w = if m == 1 {
+            omega
+        } else {
+            geometry::solid_angle(x, &piece)
+        };
+        if !(w > 0.0) {
+            continue;
+        }
+        let f = if with_ff {
+            geometry::point_form_factor(x, n_x, &piece)
+        } else {
+            0.0
+        };
+        let bin = bins.bin_of(x - geometry::centroid(&piece)) as u16;
+        add_point_bin(acc, bin, f, w);
+    }
+}
+
+/// How one spreading point sees the sender: per bin, the fractions of the total form factor and
+/// solid angle of the front part, and of the solid angle of the back part.
+struct Spread {
+    point: DVec3,
+    front: PointBins,
+    back: PointBins,
+}
+
+impl Spread {
+    fn new(x: DVec3, n_x: DVec3, front: &Poly, back: &Poly, bins: &Bins, params: &CouplingParams) -> Spread {
+        let mut spread = Spread {
+            point: x,
+            front: PointBins::new(),
+            back: PointBins::new(),
+        };
+        for part in front.triangles() {
+            spread_part(x, n_x, &part, true, bins, params, &mut spread.front);
+        }
+        if params.two_sided {
+            for part in back.triangles() {
+                spread_part(x, n_x, &part, false, bins, params, &mut spread.back);
+            }
+        }
+        for list in [&mut spread.front, &mut spread.back] {
+            let f_total: f64 = list.iter().map(|e| e.1).sum();
+            let w_total: f64 = list.iter().map(|e| e.2).sum();
+            for e in list.iter_mut() {
+                // Where the form factor vanishes at this point (grazing), share it like the
+                // solid angle.
+                e.1 = if f_total > 0.0 { e.1 / f_total } else { e.2 / w_total.max(f64::MIN_POSITIVE) };
+                e.2 = if w_total > 0.0 { e.2 / w_total } else { 0.0 };
+            }
+        }
+        spread
+    }
+}
+
+/// Exact form factor and solid angle of the triangles of `poly` seen from `x` (normal `n_x`).
+fn poly_ff_omega(x: DVec3, n_x: DVec3, poly: &Poly, with_ff: bool) -> (f64, f64) {
+    let mut f = 0.0;
+    let mut w = 0.0;
+    for part in poly.triangles() {
+        if with_ff {
+            f += geometry::point_form_factor(x, n_x, &part);
+        }
+        w += geometry::solid_angle(x, &part);
+    }
+    (f, w)
+}
+
+/// Computes the coupling of sender `s` to receiver `r` into `out` (cleared first).
+///
+/// The receiver is integrated with q x q points (q from the pair's [`separation`]), each with the
+/// exact form factor and solid angle of the sender; how those split over bins is measured at up
+/// to 2 x 2 spreading points, each splitting the sender into pieces small against a bin. Per
+/// receiver point, no bin receives more solid angle than it spans. Exactly coplanar pairs
+/// exchange nothing. Preconditions: both patches have positive area.
+pub fn couple(
+    r: &PatchGeom,
+    s: &PatchGeom,
+    bins: &Bins,
+    params: &CouplingParams,
+    out: &mut Coupling,
+) {
+    out.clear();
+    let tol = PLANE_EPS * r.size.max(s.size);
+    let (front, back) = geometry::clip_by_plane(&s.corners, r.corners[0], r.normal, tol);
+    if front.len == 0 && (back.len == 0 || !params.two_sided) {
+        return;
+    }
+    let q = receiver_quadrature(separation(r, s), params.near_quadrature);
+    let q_spread = q.min(2);
+    let spreads: SmallVec<[Spread; 4]> = if q_spread == 1 {
+        smallvec::smallvec![Spread::new(r.centroid, r.normal, &front, &back, bins, params)]
+    } else {
+        geometry::subdivide(&r.corners, q_spread)
+            .map(|t| Spread::new(geometry::centroid(&t), r.normal, &front, &back, bins, params))
+            .collect()
+    };
+    let weight = 1.0 / (q * q) as f64;
+    let mut acc = PointBins::new();
+    let points: SmallVec<[DVec3; 16]> = if q == 1 {
+        smallvec::smallvec![r.centroid]
+    } else {
+        geometry::subdivide(&r.corners, q)
+            .map(|t| geometry::centroid(&t))
+            .collect()
+    };
+    for x in points {
+        // The sender's B reaches x only if x is in front of it; its antiradiance leaves through
+        // its back (front-only mode) or through either side (two-sided mode).
+        let facing = s.normal.dot(x - s.corners[0]) > 0.0;
+        let anti_leaves = params.two_sided || !facing;
+        let spread = spreads
+            .iter()
+            .min_by(|a, b| {
+                (a.point - x)
+                    .length_squared()
+                    .total_cmp(&(b.point - x).length_squared())
+            })
+            .expect("at least one spreading point");
+        acc.clear();
+        let (f_front, w_front) = poly_ff_omega(x, r.normal, &front, true);
+        for &(bin, f_frac, w_frac) in &spread.front {
+            add_point_bin(&mut acc, bin, f_front * f_frac, w_front * w_frac);
+        }
+        if params.two_sided {
+            let (_, w_back) = poly_ff_omega(x, r.normal, &back, false);
+            for &(bin, _, w_frac) in &spread.back {
+                add_point_bin(&mut acc, bin, 0.0, w_back * w_frac);
+            }
+        }
+        for &(bin, f, omega) in &acc {
+            let o = (omega / bins.solid_angle[bin as usize]).min(1.0);
+            let (f, o) = ((f * weight) as f32, (o * weight) as f32);
+            let entry = match out.iter_mut().find(|e| e.bin == bin) {
+                Some(e) => e,
+                None => {
+                    out.push(Entry {
+                        bin,
+                        ..Entry::default()
+                    });
+                    out.last_mut().expect("just pushed")
+                }
+            };
+            if anti_leaves {
+                entry.f_a += f;
+                entry.o_a += o;
+            }
+            if facing {
+                entry.f_b += f;
+                entry.o_b += o;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn square(z: f64, up: bool) -> [Tri; 2] {
+        let (a, b, c, d) = (
+            DVec3::new(0.0, 0.0, z),
+            DVec3::new(1.0, 0.0, z),
+            DVec3::new(1.0, 1.0, z),
+            DVec3::new(0.0, 1.0, z),
+        );
+        if up {
+            [[a, b, c], [a, c, d]]
+        } else {
+            [[a, c, b], [a, d, c]]
+        }
+    }
+
+    fn geom(t: Tri) -> PatchGeom {
+        PatchGeom::new(t, geometry::normal(&t).unwrap())
+    }
+
+    /// Form factor from receiver square to sender square via couplings, area weighted.
+    fn square_ff(recv: [Tri; 2], send: [Tri; 2], bins: &Bins) -> f64 {
+        let params = CouplingParams::default();
+        let mut out = Coupling::new();
+        let mut total = 0.0;
+        for r in &recv {
+            for s in &send {
+                couple(&geom(*r), &geom(*s), bins, &params, &mut out);
+                let f: f64 = out.iter().map(|e| e.f_b as f64).sum();
+                assert!(out.iter().all(|e| e.f_a == 0.0), "front-facing: no antiradiance read");
+                total += f * geometry::area(r);
+            }
+        }
+        total
+    }
+
+    #[test]
+    fn parallel_squares() {
+        let bins = Bins::new(8);
+        let f = square_ff(square(0.0, true), square(1.0, false), &bins);
+        eprintln!("par {f}"); assert!((f - 0.19982).abs() < 0.01 * 0.19982, "{f}");
+    }
+
+    #[test]
+    fn perpendicular_squares() {
+        let bins = Bins::new(8);
+        let floor = square(0.0, true);
+        // Wall in the plane y = 0, facing +y, sharing the edge y = 0, z = 0.
+        let (a, b, c, d) = (
+            DVec3::new(0.0, 0.0, 0.0),
+            DVec3::new(0.0, 0.0, 1.0),
+            DVec3::new(1.0, 0.0, 1.0),
+            DVec3::new(1.0, 0.0, 0.0),
+        );
+        let wall = [[a, b, c], [a, c, d]];
+        assert!(geometry::normal(&wall[0]).unwrap().y > 0.9);
+        let f = square_ff(floor, wall, &bins);
+        eprintln!("perp {f}"); assert!((f - 0.20004).abs() < 0.01 * 0.20004, "{f}");
+    }
+
+    #[test]
+    fn no_bin_gets_more_than_its_solid_angle() {
+        let bins = Bins::new(4);
+        let params = CouplingParams::default();
+        let mut out = Coupling::new();
+        // A huge sender right above a small receiver covers many bins.
+        let r = geom(square(0.0, true)[0]);
+        let big = [
+            DVec3::new(-50.0, -50.0, 0.01),
+            DVec3::new(-50.0, 100.0, 0.01),
+            DVec3::new(100.0, -50.0, 0.01),
+        ];
+        let s = geom(big);
+        couple(&r, &s, &bins, &params, &mut out);
+        assert!(out.len() > 4, "spread over bins: {}", out.len());
+        for e in &out {
+            assert!(e.o_a <= 1.0 + 1e-6, "{e:?}");
+        }
+        let total: f64 = out.iter().map(|e| e.f_b as f64).sum();
+        assert!(total > 0.9 && total <= 1.0 + 1e-6, "{total}");
+    }
+
+    #[test]
+    fn coplanar_pairs_exchange_nothing() {
+        let bins = Bins::new(8);
+        let sq = square(0.0, true);
+        let mut out = Coupling::new();
+        couple(&geom(sq[0]), &geom(sq[1]), &bins, &CouplingParams::default(), &mut out);
+        assert!(out.is_empty());
+    }
+}
