@@ -8,6 +8,7 @@ pub mod bins;
 pub mod dense;
 pub mod error;
 pub mod geometry;
+pub mod hierarchical;
 pub mod mesh;
 pub mod output;
 pub mod progress;
