@@ -1,11 +1,301 @@
-//! The hierarchical antiradiance solver (work in progress: currently delegates to the dense one).
+//! The hierarchical antiradiance solver: transport over refined links with push/pull.
+//!
+//! Per sweep (Jacobi, like the dense solver):
+//! 1. pull: every cluster link's sender node sums the radiant intensity its elements send along
+//!    the link's direction, `I = sum_e a_e (B_e max(0, n_e . w) - A_e[bin(w)] |n_e . w|)` (the
+//!    antiradiance term only where it leaves the element: through its back by default);
+//! 2. push/gather: every element collects from the links into itself and into each of its
+//!    ancestors: irradiance `max(0, -n_e . w) I / (pi d^2)` with its own cosine, and antiradiance
+//!    `I / (d^2 Omega_bin)` in the link's bin when the light arrives at its front; plus the exact
+//!    couplings of its element links (the same [`crate::transport::couple`] as the dense solver);
+//! 3. every element forms `B = E + rho H` and its new antiradiance bins.
 
+use std::time::Instant;
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use crate::bins::Bins;
+use crate::hierarchy::{ClusterTree, NONE};
+use crate::links::{self, LinkParams, Links};
 use crate::mesh::Patches;
 use crate::progress::Progress;
-use crate::solution::Solution;
-use crate::solve::SolverOptions;
+use crate::solution::{SolveStats, Solution};
+use crate::solve::{finish, Convergence, SolverOptions};
+
+/// Time spent in each stage of a hierarchical solve, seconds.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct HierarchyTimings {
+    /// Cluster tree (obvhs BVH2 and our arrays).
+    pub tree: f64,
+    /// Link refinement including exact couplings.
+    pub links: f64,
+    /// All iterations.
+    pub iterate: f64,
+}
+
+/// A scene prepared for hierarchical solving: tree, links and element arrays. Build it once and
+/// solve it as many times as needed (different emission: see [`Prepared::solve_with_emission`]).
+pub struct Prepared {
+    /// The cluster tree (finalized).
+    pub tree: ClusterTree,
+    /// The refined links.
+    pub links: Links,
+    /// The direction bins.
+    pub bins: Bins,
+    /// Per element: area, unit normal, albedo, emission (normalized), patch.
+    elem_area: Vec<f64>,
+    elem_normal: Vec<DVec3>,
+    elem_albedo: Vec<[f64; 3]>,
+    elem_patch: Vec<u32>,
+    /// Solver options the links were refined for.
+    pub options: SolverOptions,
+    /// Build timings.
+    pub timings: HierarchyTimings,
+}
+
+/// The link parameters implied by solver options.
+pub fn link_params(options: &SolverOptions) -> LinkParams {
+    LinkParams {
+        epsilon: options.epsilon,
+        ..LinkParams::default()
+    }
+}
+
+impl Prepared {
+    /// Builds the tree and refines the links for `patches`.
+    pub fn new(patches: &Patches, options: &SolverOptions, record_culled: bool) -> Prepared {
+        let bins = Bins::new(options.bins);
+        let t0 = Instant::now();
+        let mut tree = ClusterTree::build(patches);
+        let t1 = Instant::now();
+        let links = links::refine(
+            &mut tree,
+            &bins,
+            &link_params(options),
+            &options.coupling(),
+            record_culled,
+        );
+        let t2 = Instant::now();
+        debug_assert!(tree.validate().is_ok(), "{:?}", tree.validate());
+        let mut prepared = Prepared {
+            elem_area: Vec::with_capacity(tree.elements.len()),
+            elem_normal: Vec::with_capacity(tree.elements.len()),
+            elem_albedo: Vec::with_capacity(tree.elements.len()),
+            elem_patch: Vec::with_capacity(tree.elements.len()),
+            tree,
+            links,
+            bins,
+            options: options.clone(),
+            timings: HierarchyTimings {
+                tree: (t1 - t0).as_secs_f64(),
+                links: (t2 - t1).as_secs_f64(),
+                iterate: 0.0,
+            },
+        };
+        for &node in &prepared.tree.elements {
+            let n = &prepared.tree.nodes[node as usize];
+            prepared.elem_area.push(n.area);
+            prepared.elem_normal.push(n.plane.map(|p| p.0).unwrap_or(DVec3::Z));
+            prepared.elem_albedo.push(patches.albedo[n.patch as usize]);
+            prepared.elem_patch.push(n.patch);
+        }
+        prepared
+    }
+
+    /// Number of elements (leaf triangles after on-demand subdivision).
+    pub fn element_count(&self) -> usize {
+        self.elem_area.len()
+    }
+
+    /// Bytes held by tree, links and per-sweep arrays.
+    pub fn bytes(&self) -> u64 {
+        let n = self.element_count() as u64;
+        let nb = self.bins.len() as u64;
+        self.links.bytes()
+            + (self.tree.nodes.len() * std::mem::size_of::<crate::hierarchy::Node>()) as u64
+            + n * (8 + 24 + 24 + 4)
+            + 2 * n * (24 + nb * 12)
+            + self.links.cluster.len() as u64 * 24
+    }
+
+    /// Solves with the patches' own emission.
+    pub fn solve(&mut self, patches: &Patches, progress: &Progress) -> (Solution, Vec<[f64; 3]>, Vec<[f32; 3]>) {
+        self.solve_with_emission(patches, &patches.emission, None, progress)
+    }
+
+    /// Solves for a given per-patch emission (normalized units, as in `Patches::emission`),
+    /// optionally warm-starting from a previous element state `(radiance, antiradiance)`.
+    /// Returns the solution and the final element state for the next warm start.
+    pub fn solve_with_emission(
+        &mut self,
+        patches: &Patches,
+        patch_emission: &[[f64; 3]],
+        warm: Option<(&[[f64; 3]], &[[f32; 3]])>,
+        progress: &Progress,
+    ) -> (Solution, Vec<[f64; 3]>, Vec<[f32; 3]>) {
+        let t0 = Instant::now();
+        let options = &self.options;
+        let nb = self.bins.len();
+        let n = self.element_count();
+        let two_sided = options.two_sided;
+        let use_anti = options.antiradiance;
+        let emission: Vec<[f64; 3]> = self
+            .elem_patch
+            .iter()
+            .map(|&p| patch_emission[p as usize])
+            .collect();
+        let (mut radiance, mut anti) = match warm {
+            Some((b, a)) if b.len() == n && a.len() == n * nb => (b.to_vec(), a.to_vec()),
+            _ => (emission.clone(), vec![[0.0f32; 3]; n * nb]),
+        };
+        let mut next_radiance = radiance.clone();
+        let mut next_anti = anti.clone();
+        let mut intensity = vec![[0.0f64; 3]; self.links.cluster.len()];
+        let mut stats = SolveStats {
+            links: self.links.len() as u64,
+            solver_bytes: self.bytes(),
+            ..SolveStats::default()
+        };
+        let mut convergence = Convergence::default();
+        let tree = &self.tree;
+        let links = &self.links;
+        let bins = &self.bins;
+        let (elem_area, elem_normal, elem_albedo) = (&self.elem_area, &self.elem_normal, &self.elem_albedo);
+        let inv_pi = 1.0 / std::f64::consts::PI;
+
+        for iteration in 1..=options.max_iterations {
+            // 1. Pull: sender intensity along every cluster link.
+            intensity
+                .par_iter_mut()
+                .zip(links.cluster.par_iter())
+                .for_each(|(out, l)| {
+                    let w = DVec3::new(l.w[0] as f64, l.w[1] as f64, l.w[2] as f64);
+                    let (e0, e1) = tree.nodes[l.sender as usize].elements;
+                    let mut acc = [0.0f64; 3];
+                    for e in e0 as usize..e1 as usize {
+                        let cos = elem_normal[e].dot(w);
+                        let a = elem_area[e];
+                        if cos > 0.0 {
+                            for c in 0..3 {
+                                acc[c] += a * cos * radiance[e][c];
+                            }
+                        }
+                        if use_anti && (two_sided || cos < 0.0) {
+                            let anti_e = anti[e * nb + l.bin as usize];
+                            let k = a * cos.abs();
+                            for c in 0..3 {
+                                acc[c] -= k * anti_e[c] as f64;
+                            }
+                        }
+                    }
+                    *out = acc;
+                });
+
+            // 2-3. Gather per element: exact links, then cluster links into it and its ancestors.
+            let change_parts: Vec<(f64, f64, f64)> = next_radiance
+                .par_iter_mut()
+                .zip(next_anti.par_chunks_mut(nb))
+                .enumerate()
+                .map(|(e, (b_out, a_out))| {
+                    let mut h = [0.0f64; 3];
+                    let mut a_acc = vec![[0.0f64; 3]; nb];
+                    let mut row = 0.0;
+                    for l in links.exact_start[e]..links.exact_start[e + 1] {
+                        let s = links.exact_sender[l as usize] as usize;
+                        let b_s = radiance[s];
+                        let entries = &links.exact_entries[links.exact_entry_start[l as usize] as usize
+                            ..links.exact_entry_start[l as usize + 1] as usize];
+                        for en in entries {
+                            row += if two_sided { en.f_a } else { en.f_a + en.f_b } as f64;
+                            let a_s = anti[s * nb + en.bin as usize];
+                            for c in 0..3 {
+                                let a = if use_anti { a_s[c] as f64 } else { 0.0 };
+                                h[c] += en.f_b as f64 * b_s[c] - en.f_a as f64 * a;
+                                a_acc[en.bin as usize][c] += en.o_b as f64 * b_s[c] - en.o_a as f64 * a;
+                            }
+                        }
+                    }
+                    let n_e = elem_normal[e];
+                    let mut node = tree.elements[e];
+                    while node != NONE {
+                        let range = links.cluster_start[node as usize] as usize
+                            ..links.cluster_start[node as usize + 1] as usize;
+                        for (l, i) in links.cluster[range.clone()].iter().zip(&intensity[range]) {
+                            let w = DVec3::new(l.w[0] as f64, l.w[1] as f64, l.w[2] as f64);
+                            let cos = -n_e.dot(w);
+                            let g = l.inv_d2 as f64;
+                            if cos > 0.0 {
+                                let k = cos * g * inv_pi;
+                                for c in 0..3 {
+                                    h[c] += k * i[c];
+                                }
+                            }
+                            if use_anti && (cos > 0.0 || two_sided) {
+                                let k = g / bins.solid_angle[l.bin as usize];
+                                for c in 0..3 {
+                                    a_acc[l.bin as usize][c] += k * i[c];
+                                }
+                            }
+                        }
+                        node = tree.nodes[node as usize].parent;
+                    }
+                    for c in 0..3 {
+                        b_out[c] = emission[e][c] + elem_albedo[e][c] * h[c];
+                    }
+                    for (dst, src) in a_out.iter_mut().zip(&a_acc) {
+                        *dst = src.map(|x| x as f32);
+                    }
+                    let a = elem_area[e];
+                    let num: f64 = (0..3).map(|c| a * (b_out[c] - radiance[e][c]).abs()).sum();
+                    let den: f64 = (0..3).map(|c| a * b_out[c].abs()).sum();
+                    (num, den, row)
+                })
+                .collect();
+            let (num, den) = change_parts.iter().fold((0.0, 0.0), |acc, p| (acc.0 + p.0, acc.1 + p.1));
+            if iteration == 1 {
+                stats.max_row_sum = change_parts.iter().map(|p| p.2).fold(0.0, f64::max);
+            }
+            let change = if den > 0.0 { num / den } else { 0.0 };
+            std::mem::swap(&mut radiance, &mut next_radiance);
+            std::mem::swap(&mut anti, &mut next_anti);
+            stats.iterations = iteration;
+            progress.inc(1);
+            progress.message(format!("residual {change:.2e}"));
+            if convergence.update(change, options.tol) && iteration >= 3 {
+                stats.converged = true;
+                break;
+            }
+        }
+        stats.residual = convergence.residual;
+
+        // Elements -> patches (area-weighted mean), inactive patches keep their emission.
+        let mut patch_sum = vec![[0.0f64; 3]; patches.len()];
+        let mut patch_area = vec![0.0f64; patches.len()];
+        for e in 0..n {
+            let p = self.elem_patch[e] as usize;
+            patch_area[p] += elem_area[e];
+            for c in 0..3 {
+                patch_sum[p][c] += elem_area[e] * radiance[e][c];
+            }
+        }
+        let patch_radiance: Vec<[f64; 3]> = (0..patches.len())
+            .map(|p| {
+                if patch_area[p] > 0.0 {
+                    patch_sum[p].map(|x| x / patch_area[p])
+                } else {
+                    patch_emission[p]
+                }
+            })
+            .collect();
+        self.timings.iterate = t0.elapsed().as_secs_f64();
+        let solution = finish(patches, patch_radiance, stats, options.clamp_negative);
+        (solution, radiance, anti)
+    }
+}
 
 /// Solves the scene with the hierarchical solver. Preconditions: `options.validate()` passed.
 pub fn solve_hierarchical(patches: &Patches, options: &SolverOptions, progress: &Progress) -> Solution {
-    crate::dense::solve_dense(patches, options, progress)
+    let mut prepared = Prepared::new(patches, options, false);
+    prepared.solve(patches, progress).0
 }

@@ -1,0 +1,313 @@
+//! Stage 3b: link refinement. Every ordered pair of elements (leaf triangles) is covered by
+//! exactly one link: a cluster link between two nodes that are small as seen from each other,
+//! an exact element-to-element coupling, or a culled pair that exchanges nothing.
+
+use rayon::prelude::*;
+
+use crate::bins::Bins;
+use crate::hierarchy::ClusterTree;
+use crate::transport::{couple, Coupling, CouplingParams, Entry, PatchGeom};
+
+/// Parameters of link refinement.
+#[derive(Clone, Copy, Debug)]
+pub struct LinkParams {
+    /// Largest solid angle either end of a cluster link may subtend from the other, as a
+    /// fraction of the mean bin solid angle. Smaller: more, finer links. 0.1..2; 0.5 by default.
+    /// 0 forces every link down to element pairs (the dense solver's couplings).
+    pub epsilon: f64,
+    /// Smallest bounding-sphere radius (unit frame: scene diameter 1) a triangle is split down
+    /// to when a near neighbour needs it finer. 0.005..0.05; 0.01 by default.
+    pub min_radius: f64,
+    /// Most times one patch may be split in four. 0..6; 4 by default (256 pieces).
+    pub max_split_depth: u8,
+}
+
+impl Default for LinkParams {
+    fn default() -> Self {
+        LinkParams {
+            epsilon: 0.5,
+            min_radius: 0.01,
+            max_split_depth: 4,
+        }
+    }
+}
+
+/// A cluster link: sender node S sends to receiver node R as one exchange along `w`.
+#[derive(Clone, Copy, Debug)]
+pub struct ClusterLink {
+    /// Sender node.
+    pub sender: u32,
+    /// Receiver node.
+    pub receiver: u32,
+    /// Unit direction of travel, sender centre to receiver centre.
+    pub w: [f32; 3],
+    /// 1 / squared centre distance.
+    pub inv_d2: f32,
+    /// Direction bin of `w`.
+    pub bin: u16,
+}
+
+/// The refined links, grouped by receiver.
+#[derive(Clone, Debug, Default)]
+pub struct Links {
+    /// Cluster links sorted by receiver node.
+    pub cluster: Vec<ClusterLink>,
+    /// For each node, its incoming cluster links: `cluster[cluster_start[i]..cluster_start[i+1]]`.
+    pub cluster_start: Vec<u32>,
+    /// Exact element links: sender element per link, sorted by receiver element.
+    pub exact_sender: Vec<u32>,
+    /// Coupling entries of each exact link: `exact_entries[exact_entry_start[l]..[l+1]]`.
+    pub exact_entry_start: Vec<u32>,
+    /// All coupling entries, flat.
+    pub exact_entries: Vec<Entry>,
+    /// For each element, its incoming exact links: `exact_start[e]..exact_start[e+1]`.
+    pub exact_start: Vec<u32>,
+    /// Pairs of nodes found to exchange nothing (kept only when `record_culled` was asked).
+    pub culled: Vec<(u32, u32)>,
+}
+
+impl Links {
+    /// Total number of links (cluster + exact).
+    pub fn len(&self) -> usize {
+        self.cluster.len() + self.exact_sender.len()
+    }
+
+    /// True when there is no link at all.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Bytes held by the link arrays.
+    pub fn bytes(&self) -> u64 {
+        (self.cluster.len() * std::mem::size_of::<ClusterLink>()
+            + self.cluster_start.len() * 4
+            + self.exact_sender.len() * 8
+            + self.exact_entries.len() * std::mem::size_of::<Entry>()
+            + self.exact_start.len() * 4) as u64
+    }
+}
+
+/// Solid angle of a sphere of radius `r` whose centre is at distance `d`, conservatively large.
+fn sphere_solid_angle(r: f64, d: f64) -> f64 {
+    if d <= r {
+        return 4.0 * std::f64::consts::PI;
+    }
+    let s = (r / d).min(1.0);
+    2.0 * std::f64::consts::PI * (1.0 - (1.0 - s * s).sqrt())
+}
+
+/// True when nothing can travel from S to R: R is flat and S lies entirely in or behind its plane
+/// (front-only antiradiance), or S and R are flat in one plane (either mode).
+fn culled(tree: &ClusterTree, s: u32, r: u32, two_sided: bool) -> bool {
+    let (sn, rn) = (&tree.nodes[s as usize], &tree.nodes[r as usize]);
+    let Some((n, d)) = rn.plane else { return false };
+    let tol = crate::geometry::PLANE_EPS * (sn.radius + rn.radius);
+    // Largest signed distance of S's bounds to R's plane.
+    let (lo, hi) = sn.bounds;
+    let mut max_dist = f64::NEG_INFINITY;
+    let mut min_dist = f64::INFINITY;
+    for k in 0..8 {
+        let corner = glam::DVec3::new(
+            if k & 1 == 0 { lo.x } else { hi.x },
+            if k & 2 == 0 { lo.y } else { hi.y },
+            if k & 4 == 0 { lo.z } else { hi.z },
+        );
+        let dist = n.dot(corner) - d;
+        max_dist = max_dist.max(dist);
+        min_dist = min_dist.min(dist);
+    }
+    let sphere_dist = n.dot(sn.center) - d;
+    let max_dist = max_dist.min(sphere_dist + sn.radius);
+    let min_dist = min_dist.max(sphere_dist - sn.radius);
+    if max_dist <= tol && (!two_sided || min_dist >= -tol) {
+        return true;
+    }
+    // Coplanar flat clusters exchange nothing in either mode.
+    if let Some((n2, d2)) = sn.plane {
+        if n.dot(n2).abs() > 1.0 - 1e-9 && (n.dot(n2) * d2 - d).abs() <= tol && max_dist <= tol && min_dist >= -tol {
+            return true;
+        }
+    }
+    false
+}
+
+/// Refines links over the whole tree, splitting leaf triangles where needed, then finalizes the
+/// tree (element numbering) and computes exact couplings in parallel.
+pub fn refine(
+    tree: &mut ClusterTree,
+    bins: &Bins,
+    params: &LinkParams,
+    coupling: &CouplingParams,
+    record_culled: bool,
+) -> Links {
+    let limit = params.epsilon * bins.mean_solid_angle();
+    let mut cluster: Vec<ClusterLink> = Vec::new();
+    let mut exact_pairs: Vec<(u32, u32)> = Vec::new();
+    let mut culled_pairs = Vec::new();
+    let mut stack: Vec<(u32, u32)> = vec![(0, 0)];
+
+    while let Some((s, r)) = stack.pop() {
+        // Self pair: a leaf does not exchange with itself; a cluster's children exchange pairwise.
+        if s == r {
+            let node = &tree.nodes[s as usize];
+            if node.is_leaf() {
+                continue;
+            }
+            let (first, count) = (node.first_child, node.child_count as u32);
+            for a in first..first + count {
+                for b in first..first + count {
+                    stack.push((a, b));
+                }
+            }
+            continue;
+        }
+        if culled(tree, s, r, coupling.two_sided) {
+            if record_culled {
+                culled_pairs.push((s, r));
+            }
+            continue;
+        }
+        let (sn, rn) = (&tree.nodes[s as usize], &tree.nodes[r as usize]);
+        let d = (rn.center - sn.center).length();
+        let gap = d - sn.radius - rn.radius;
+        if params.epsilon > 0.0 && gap > 0.0 {
+            let omega_s = sphere_solid_angle(sn.radius, d - rn.radius);
+            let omega_r = sphere_solid_angle(rn.radius, d - sn.radius);
+            if omega_s <= limit && omega_r <= limit {
+                let w = (rn.center - sn.center) / d;
+                cluster.push(ClusterLink {
+                    sender: s,
+                    receiver: r,
+                    w: [w.x as f32, w.y as f32, w.z as f32],
+                    inv_d2: (1.0 / (d * d)) as f32,
+                    bin: bins.bin_of(w) as u16,
+                });
+                continue;
+            }
+        }
+        // Too coarse: split the larger node. Leaves split (into sub-triangles) only while they are
+        // large against the gap to the other node and above the resolution floor.
+        // A leaf triangle is split only when it is much larger than its partner and than the gap
+        // between them (a coarse floor under a small object), never among similar neighbours.
+        let leaf_splittable = |n: &crate::hierarchy::Node, other: &crate::hierarchy::Node| {
+            params.epsilon > 0.0
+                && n.split_depth < params.max_split_depth
+                && n.radius > params.min_radius
+                && n.radius > 2.0 * other.radius
+                && n.radius > gap.max(0.0)
+        };
+        let s_can = !sn.is_leaf() || leaf_splittable(sn, rn);
+        let r_can = !rn.is_leaf() || leaf_splittable(rn, sn);
+        let split_s = match (s_can, r_can) {
+            (false, false) => {
+                exact_pairs.push((s, r));
+                continue;
+            }
+            (true, false) => true,
+            (false, true) => false,
+            (true, true) => sn.radius >= rn.radius,
+        };
+        let node = if split_s { s } else { r };
+        if tree.nodes[node as usize].is_leaf() {
+            tree.split_leaf(node);
+        }
+        let n = &tree.nodes[node as usize];
+        for c in n.first_child..n.first_child + n.child_count as u32 {
+            stack.push(if split_s { (c, r) } else { (s, c) });
+        }
+    }
+
+    tree.finalize();
+
+    // Cluster links grouped by receiver node.
+    cluster.sort_unstable_by_key(|l| l.receiver);
+    let mut cluster_start = vec![0u32; tree.nodes.len() + 1];
+    for l in &cluster {
+        cluster_start[l.receiver as usize + 1] += 1;
+    }
+    for i in 0..tree.nodes.len() {
+        cluster_start[i + 1] += cluster_start[i];
+    }
+
+    // Exact couplings, computed in parallel, grouped by receiver element.
+    let element_of = |node: u32| tree.nodes[node as usize].elements.0;
+    exact_pairs.sort_unstable_by_key(|&(s, r)| (element_of(r), element_of(s)));
+    let geom = |node: u32| {
+        let n = &tree.nodes[node as usize];
+        PatchGeom::new(n.corners, n.plane.map(|p| p.0).unwrap_or(glam::DVec3::Z))
+    };
+    let couplings: Vec<Coupling> = exact_pairs
+        .par_iter()
+        .map_init(Coupling::new, |scratch, &(s, r)| {
+            couple(&geom(r), &geom(s), bins, coupling, scratch);
+            scratch.clone()
+        })
+        .collect();
+    let n_elements = tree.elements.len();
+    let mut links = Links {
+        cluster,
+        cluster_start,
+        exact_start: vec![0u32; n_elements + 1],
+        ..Links::default()
+    };
+    for (&(s, r), entries) in exact_pairs.iter().zip(&couplings) {
+        if entries.is_empty() {
+            if record_culled {
+                links.culled.push((s, r));
+            }
+            continue;
+        }
+        links.exact_entry_start.push(links.exact_entries.len() as u32);
+        links.exact_entries.extend_from_slice(entries);
+        links.exact_sender.push(element_of(s));
+        links.exact_start[element_of(r) as usize + 1] += 1;
+    }
+    links.exact_entry_start.push(links.exact_entries.len() as u32);
+    for e in 0..n_elements {
+        links.exact_start[e + 1] += links.exact_start[e];
+    }
+    if record_culled {
+        links.culled.extend(culled_pairs);
+    }
+    links
+}
+
+/// Checks on a small scene that every ordered pair of distinct elements is covered exactly once
+/// (by a cluster link, an exact link or a culled pair) and no element is linked to itself.
+/// Needs links refined with `record_culled`. Cost O(elements^2): for tests and debug builds.
+pub fn validate(tree: &ClusterTree, links: &Links) -> Result<(), String> {
+    let n = tree.elements.len();
+    let mut count = vec![0u8; n * n];
+    let mut cover = |s: (u32, u32), r: (u32, u32)| {
+        for a in s.0..s.1 {
+            for b in r.0..r.1 {
+                let c = &mut count[b as usize * n + a as usize];
+                *c = c.saturating_add(1);
+            }
+        }
+    };
+    for l in &links.cluster {
+        cover(tree.nodes[l.sender as usize].elements, tree.nodes[l.receiver as usize].elements);
+    }
+    for &(s, r) in &links.culled {
+        cover(tree.nodes[s as usize].elements, tree.nodes[r as usize].elements);
+    }
+    for r in 0..n {
+        for l in links.exact_start[r]..links.exact_start[r + 1] {
+            let s = links.exact_sender[l as usize];
+            cover((s, s + 1), (r as u32, r as u32 + 1));
+        }
+    }
+    for r in 0..n {
+        for s in 0..n {
+            let c = count[r * n + s];
+            let want = u8::from(r != s);
+            if c != want {
+                return Err(format!(
+                    "element pair (sender {s}, receiver {r}) covered {c} times, expected {want}"
+                ));
+            }
+        }
+    }
+    Ok(())
+}
