@@ -176,52 +176,97 @@ impl Scene {
 /// Errors name the file and, where known, the line: missing or unreadable file, empty or binary
 /// file, malformed numbers, NaN or infinite coordinates, face index out of range, colour lines with
 /// fewer than three numbers, albedo outside [0, 1), negative emission, no non-degenerate triangle.
-/// A missing MTL file and a scene without emitters are warnings (in `Scene::warnings`).
+/// A missing MTL file, a `usemtl` naming a material no MTL file defines and a scene without
+/// emitters are warnings (in `Scene::warnings`).
+///
+/// Only what the model uses is read: vertex positions (`v x y z`, optionally `w`, vertex colours
+/// ignored), faces (position indices; texture and normal references are ignored), `mtllib`,
+/// `usemtl`, and the `newmtl`, `Kd` and `Ke` lines of material files. Comments may follow `#` on
+/// any line; words may be separated by spaces or tabs; lines may end in CRLF.
 pub fn load_obj(path: &Path, options: &SceneOptions) -> Result<Scene> {
     options.validate()?;
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     let text = as_text(path, &bytes)?;
     let obj_scan = scan_obj(path, text)?;
 
-    // Materials: every mtllib is checked line by line first (tobj panics on short colour lines),
-    // then tobj parses it and resolves `usemtl` names itself.
+    // Materials: every MTL file is checked line by line first (tobj panics on short colour lines)
+    // and reduced to the lines we use (tobj drops a whole file over one line it cannot parse),
+    // then tobj resolves `usemtl` names against them.
     let mut warnings = Vec::new();
     let base_dir = path.parent().unwrap_or(Path::new("."));
-    let mut mtl_texts: std::collections::HashMap<String, String> = Default::default();
+    let mut mtl_texts: Vec<String> = Vec::new();
+    let mut defined: std::collections::HashSet<String> = Default::default();
+    let mut mtl_missing = false;
     for (line, name) in &obj_scan.mtllibs {
-        let mtl_path = base_dir.join(name);
-        match std::fs::read(&mtl_path) {
-            Ok(mtl_bytes) => {
-                let mtl_text = as_text(&mtl_path, &mtl_bytes)?;
-                scan_mtl(&mtl_path, mtl_text)?;
-                mtl_texts.insert(name.clone(), mtl_text.to_string());
+        // `mtllib a.mtl b.mtl` names several files, unless a file of that whole name exists.
+        let whole = base_dir.join(name);
+        let names: Vec<&str> = if whole.is_file() || !name.contains(char::is_whitespace) {
+            vec![name.as_str()]
+        } else {
+            name.split_whitespace().collect()
+        };
+        for name in names {
+            let mtl_path = base_dir.join(name);
+            match std::fs::read(&mtl_path) {
+                Ok(mtl_bytes) => {
+                    let mtl_text = as_text(&mtl_path, &mtl_bytes)?;
+                    let mtl_scan = scan_mtl(&mtl_path, mtl_text)?;
+                    defined.extend(mtl_scan.names);
+                    mtl_texts.push(mtl_scan.clean);
+                }
+                Err(e) => {
+                    mtl_missing = true;
+                    warnings.push(format!(
+                        "{}:{}: material file {} cannot be read ({e}); using --albedo for its materials",
+                        path.display(),
+                        line,
+                        mtl_path.display()
+                    ))
+                }
             }
-            Err(_) => warnings.push(format!(
-                "{}:{}: material file {} not found; using --albedo for its materials",
-                path.display(),
-                line,
-                mtl_path.display()
-            )),
+        }
+    }
+    if !mtl_missing {
+        let mut reported = std::collections::HashSet::new();
+        for (line, name) in &obj_scan.usemtls {
+            if !defined.contains(name) && reported.insert(name.as_str()) {
+                warnings.push(format!(
+                    "{}:{}: material '{}' is not defined in any material file; using --albedo",
+                    path.display(),
+                    line,
+                    name
+                ));
+            }
         }
     }
 
-    // Geometry through tobj: fan triangulation, models in file order.
+    // Geometry through tobj: fan triangulation, models in file order. tobj reads the reduced text:
+    // every material file first (named by its index), all vertices, then faces and `usemtl`
+    // lines with absolute position indices only.
+    let mut clean = String::with_capacity(obj_scan.vertices.len() + obj_scan.body.len() + 64);
+    for i in 0..mtl_texts.len() {
+        clean.push_str(&format!("mtllib {i}\n"));
+    }
+    clean.push_str(&obj_scan.vertices);
+    clean.push_str(&obj_scan.body);
     let load_options = tobj::LoadOptions {
         triangulate: true,
         single_index: false,
         ignore_points: true,
         ignore_lines: true,
     };
-    let (models, materials) = tobj::load_obj_buf(&mut text.as_bytes(), &load_options, |p| {
-        match mtl_texts.get(p.to_string_lossy().trim()) {
+    let mtl_for = |p: &Path| -> tobj::MTLLoadResult {
+        let index = p.to_str().and_then(|k| k.trim().parse::<usize>().ok());
+        match index.and_then(|i| mtl_texts.get(i)) {
             Some(mtl_text) => tobj::load_mtl_buf(&mut mtl_text.as_bytes()),
             None => Err(tobj::LoadError::OpenFileFailed),
         }
-    })
-    .map_err(|e| Error::Scene {
-        path: path.to_path_buf(),
-        message: format!("cannot parse OBJ: {e}"),
-    })?;
+    };
+    let (models, materials) = tobj::load_obj_buf(&mut clean.as_bytes(), &load_options, mtl_for)
+        .map_err(|e| Error::Scene {
+            path: path.to_path_buf(),
+            message: format!("cannot parse OBJ: {e}"),
+        })?;
     let materials = materials.unwrap_or_default();
 
     let mut scene = Scene {
@@ -304,20 +349,33 @@ fn as_text<'a>(path: &Path, bytes: &'a [u8]) -> Result<&'a str> {
             message: "binary file (contains NUL bytes), expected text".into(),
         });
     }
-    std::str::from_utf8(bytes).map_err(|e| {
-        let line = bytes[..e.valid_up_to()].iter().filter(|&&b| b == b'\n').count() + 1;
+    let text = std::str::from_utf8(bytes).map_err(|e| {
+        let line = bytes[..e.valid_up_to()]
+            .iter()
+            .filter(|&&b| b == b'\n')
+            .count()
+            + 1;
         Error::Parse {
             path: path.to_path_buf(),
             line,
             message: "not valid UTF-8 text (binary file?)".into(),
         }
-    })
+    })?;
+    Ok(text.strip_prefix('\u{feff}').unwrap_or(text))
 }
 
 /// What the line-level scan of an OBJ file learned.
 struct ObjScan {
+    /// `mtllib` lines: (line number, the rest of the line).
     mtllibs: Vec<(usize, String)>,
+    /// `usemtl` lines: (line number, material name).
+    usemtls: Vec<(usize, String)>,
+    /// Number of triangles after fan triangulation.
     triangle_count: usize,
+    /// Every vertex as `v x y z` (w applied, colours dropped), one per line, in file order.
+    vertices: String,
+    /// Faces (absolute position indices only) and `usemtl` lines, in file order.
+    body: String,
 }
 
 fn parse_err(path: &Path, line: usize, message: impl Into<String>) -> Error {
@@ -328,20 +386,49 @@ fn parse_err(path: &Path, line: usize, message: impl Into<String>) -> Error {
     }
 }
 
-/// Checks every `v` and `f` line of an OBJ file, so tobj only ever sees well-formed input.
+/// A line without its comment, trimmed.
+fn content(raw: &str) -> &str {
+    raw.split('#').next().unwrap_or("").trim()
+}
+
+/// The rest of `line` after its first word, trimmed (names may contain spaces).
+fn rest_after_keyword(line: &str) -> &str {
+    line.split_once(char::is_whitespace)
+        .map(|(_, rest)| rest.trim())
+        .unwrap_or("")
+}
+
+/// Checks every `v` and `f` line of an OBJ file and reduces the file to what tobj needs, so tobj
+/// only ever sees well-formed input.
 fn scan_obj(path: &Path, text: &str) -> Result<ObjScan> {
     let vertex_total = text
         .lines()
-        .filter(|l| l.trim_start().starts_with("v ") || l.trim_start().starts_with("v\t"))
+        .filter(|l| content(l).split_whitespace().next() == Some("v"))
         .count();
     let mut vertices_so_far = 0usize;
     let mut scan = ObjScan {
         mtllibs: Vec::new(),
+        usemtls: Vec::new(),
         triangle_count: 0,
+        vertices: String::new(),
+        body: String::new(),
+    };
+    let number = |w: &str, line_no: usize, what: &str| -> Result<f64> {
+        let x: f64 = w
+            .parse()
+            .map_err(|_| parse_err(path, line_no, format!("malformed number '{w}' in {what}")))?;
+        if !x.is_finite() {
+            return Err(parse_err(
+                path,
+                line_no,
+                format!("{what} value '{w}' is not finite"),
+            ));
+        }
+        Ok(x)
     };
     for (i, raw) in text.lines().enumerate() {
         let line_no = i + 1;
-        let line = raw.split('#').next().unwrap_or("").trim();
+        let line = content(raw);
         let mut words = line.split_whitespace();
         match words.next() {
             Some("v") => {
@@ -349,25 +436,54 @@ fn scan_obj(path: &Path, text: &str) -> Result<ObjScan> {
                 if nums.len() < 3 {
                     return Err(parse_err(path, line_no, "vertex needs three coordinates"));
                 }
-                for w in &nums[..3] {
-                    let x: f64 = w.parse().map_err(|_| {
-                        parse_err(path, line_no, format!("malformed number '{w}' in vertex"))
-                    })?;
-                    if !x.is_finite() {
+                if !matches!(nums.len(), 3 | 4 | 6) {
+                    return Err(parse_err(
+                        path,
+                        line_no,
+                        format!(
+                            "vertex has {} numbers; expected x y z, x y z w or x y z r g b",
+                            nums.len()
+                        ),
+                    ));
+                }
+                let mut xyz = [0.0; 3];
+                for (k, w) in nums[..3].iter().enumerate() {
+                    xyz[k] = number(w, line_no, "vertex coordinate")?;
+                }
+                for w in nums.iter().skip(4) {
+                    number(w, line_no, "vertex colour")?;
+                }
+                if nums.len() == 4 {
+                    let w = number(nums[3], line_no, "vertex weight")?;
+                    if w == 0.0 {
+                        return Err(parse_err(path, line_no, "vertex weight w is 0"));
+                    }
+                    let p = xyz.map(|x| x / w);
+                    if !p.iter().all(|x| x.is_finite()) {
                         return Err(parse_err(
                             path,
                             line_no,
-                            format!("vertex coordinate '{w}' is not finite"),
+                            "vertex coordinate is not finite after dividing by w",
                         ));
                     }
+                    scan.vertices
+                        .push_str(&format!("v {:e} {:e} {:e}\n", p[0], p[1], p[2]));
+                } else {
+                    scan.vertices
+                        .push_str(&format!("v {} {} {}\n", nums[0], nums[1], nums[2]));
                 }
                 vertices_so_far += 1;
             }
             Some("f") => {
                 let refs: Vec<&str> = words.collect();
                 if refs.len() < 3 {
-                    return Err(parse_err(path, line_no, "face needs at least three vertices"));
+                    return Err(parse_err(
+                        path,
+                        line_no,
+                        "face needs at least three vertices",
+                    ));
                 }
+                scan.body.push('f');
                 for r in &refs {
                     let first = r.split('/').next().unwrap_or("");
                     let idx: i64 = first.parse().map_err(|_| {
@@ -387,8 +503,7 @@ fn scan_obj(path: &Path, text: &str) -> Result<ObjScan> {
                             ),
                         ));
                     }
-                    // tobj rejects texture/normal references it cannot resolve; we only use
-                    // positions, so those are checked for syntax only.
+                    // Texture and normal references are not used: checked for syntax only.
                     for part in r.split('/').skip(1) {
                         if !part.is_empty() && part.parse::<i64>().is_err() {
                             return Err(parse_err(
@@ -398,17 +513,24 @@ fn scan_obj(path: &Path, text: &str) -> Result<ObjScan> {
                             ));
                         }
                     }
+                    scan.body.push_str(&format!(" {resolved}"));
                 }
+                scan.body.push('\n');
                 scan.triangle_count += refs.len() - 2;
             }
             Some("mtllib") => {
-                let name = line["mtllib".len()..].trim();
+                let name = rest_after_keyword(line);
                 if !name.is_empty() {
                     scan.mtllibs.push((line_no, name.to_string()));
                 }
             }
-            Some("usemtl") if line["usemtl".len()..].trim().is_empty() => {
-                return Err(parse_err(path, line_no, "usemtl needs a material name"));
+            Some("usemtl") => {
+                let name = rest_after_keyword(line);
+                if name.is_empty() {
+                    return Err(parse_err(path, line_no, "usemtl needs a material name"));
+                }
+                scan.body.push_str(&format!("usemtl {name}\n"));
+                scan.usemtls.push((line_no, name.to_string()));
             }
             _ => {}
         }
@@ -422,13 +544,35 @@ fn scan_obj(path: &Path, text: &str) -> Result<ObjScan> {
     Ok(scan)
 }
 
-/// Checks every colour line of an MTL file (tobj 4.0.5 panics on `Kd 0.5`) and the physical ranges.
-fn scan_mtl(path: &Path, text: &str) -> Result<()> {
+/// What the line-level scan of an MTL file learned.
+struct MtlScan {
+    /// Names of the materials the file defines.
+    names: Vec<String>,
+    /// The file reduced to `newmtl`, `Kd` and `Ke` lines.
+    clean: String,
+}
+
+/// Checks every colour line of an MTL file (tobj 4.0.5 panics on `Kd 0.5`) and the physical
+/// ranges, and reduces the file to the lines we use.
+fn scan_mtl(path: &Path, text: &str) -> Result<MtlScan> {
+    let mut scan = MtlScan {
+        names: Vec::new(),
+        clean: String::new(),
+    };
     for (i, raw) in text.lines().enumerate() {
         let line_no = i + 1;
-        let line = raw.split('#').next().unwrap_or("").trim();
+        let line = content(raw);
         let mut words = line.split_whitespace();
         let Some(key) = words.next() else { continue };
+        if key == "newmtl" {
+            let name = rest_after_keyword(line);
+            if name.is_empty() {
+                return Err(parse_err(path, line_no, "newmtl needs a material name"));
+            }
+            scan.clean.push_str(&format!("newmtl {name}\n"));
+            scan.names.push(name.to_string());
+            continue;
+        }
         if !matches!(key, "Ka" | "Kd" | "Ks" | "Ke" | "Tf") {
             continue;
         }
@@ -450,11 +594,15 @@ fn scan_mtl(path: &Path, text: &str) -> Result<()> {
         }
         let mut values = [0.0f64; 3];
         for (k, w) in nums[..3].iter().enumerate() {
-            let x: f64 = w
-                .parse()
-                .map_err(|_| parse_err(path, line_no, format!("malformed number '{w}' in {key}")))?;
+            let x: f64 = w.parse().map_err(|_| {
+                parse_err(path, line_no, format!("malformed number '{w}' in {key}"))
+            })?;
             if !x.is_finite() {
-                return Err(parse_err(path, line_no, format!("{key} value '{w}' is not finite")));
+                return Err(parse_err(
+                    path,
+                    line_no,
+                    format!("{key} value '{w}' is not finite"),
+                ));
             }
             values[k] = x;
         }
@@ -478,6 +626,10 @@ fn scan_mtl(path: &Path, text: &str) -> Result<()> {
                 ),
             ));
         }
+        if matches!(key, "Kd" | "Ke") {
+            scan.clean
+                .push_str(&format!("{key} {} {} {}\n", nums[0], nums[1], nums[2]));
+        }
     }
-    Ok(())
+    Ok(scan)
 }

@@ -1,0 +1,580 @@
+//! Built-in test scenes and an OBJ+MTL writer.
+//!
+//! Every generator returns a [`Scene`] built with [`Scene::from_triangles`]: quads become two
+//! triangles `(q0, q1, q2), (q0, q2, q3)` (the same fan an OBJ loader applies to `f q0 q1 q2 q3`),
+//! and every triangle is oriented so that its front side (counter-clockwise, see the design note)
+//! faces where light is received or emitted. [`write_obj`] writes a scene so that
+//! [`crate::scene::load_obj`] reads back the same triangles, in the same order, with the same
+//! albedo and emission, bit for bit.
+//!
+//! The generators only use exact literals, sums, products and quotients (no transcendental
+//! functions), so their output, and the files [`write_obj`] makes of it, are identical on every
+//! platform. The committed files in `scenes/` are checked against them by `tests/scenes.rs`.
+
+use std::collections::HashMap;
+use std::fmt::Write as _;
+use std::path::Path;
+
+use glam::DVec3;
+
+use crate::error::{Error, Result};
+use crate::scene::Scene;
+
+/// Cornell box white reflectance (floor, ceiling, back wall, blocks), RGB.
+pub const CORNELL_WHITE: [f64; 3] = [0.725, 0.71, 0.68];
+/// Cornell box red reflectance (the left wall seen from the camera, at x ~ 556 mm), RGB.
+pub const CORNELL_RED: [f64; 3] = [0.63, 0.065, 0.05];
+/// Cornell box green reflectance (the right wall seen from the camera, at x = 0), RGB.
+pub const CORNELL_GREEN: [f64; 3] = [0.14, 0.45, 0.091];
+/// Cornell box light reflectance, RGB (the light is a diffuse surface too).
+pub const CORNELL_LIGHT_ALBEDO: [f64; 3] = [0.78, 0.78, 0.78];
+/// Cornell box light emitted radiance, RGB (warm white, the usual RGB stand-in for the measured
+/// spectrum).
+pub const CORNELL_LIGHT_EMISSION: [f64; 3] = [17.0, 12.0, 4.0];
+
+/// The parts of [`cornell_box`] in triangle order, with their triangle counts.
+///
+/// Triangles `0..2` are the floor, the next 16 the ceiling, and so on; the counts sum to
+/// [`CORNELL_BOX_TRIANGLES`]. [`subdivide`] keeps the order and multiplies every count by k * k.
+pub const CORNELL_BOX_PARTS: [(&str, usize); 8] = [
+    ("floor", 2),
+    ("ceiling", 16),
+    ("light", 2),
+    ("back wall", 2),
+    ("red wall", 2),
+    ("green wall", 2),
+    ("short block", 10),
+    ("tall block", 10),
+];
+
+/// Number of triangles of [`cornell_box`].
+pub const CORNELL_BOX_TRIANGLES: usize = 46;
+
+/// Collects triangles with their materials, then builds a [`Scene`].
+#[derive(Default)]
+struct Builder {
+    corners: Vec<[DVec3; 3]>,
+    albedo: Vec<[f64; 3]>,
+    emission: Vec<[f64; 3]>,
+}
+
+impl Builder {
+    fn triangle(&mut self, tri: [DVec3; 3], albedo: [f64; 3], emission: [f64; 3]) {
+        self.corners.push(tri);
+        self.albedo.push(albedo);
+        self.emission.push(emission);
+    }
+
+    /// Adds a quad as `(q0, q1, q2), (q0, q2, q3)`, with the vertex order reversed first when
+    /// needed so that the front side faces `facing`.
+    fn quad(&mut self, q: [DVec3; 4], facing: DVec3, albedo: [f64; 3], emission: [f64; 3]) {
+        let n = (q[1] - q[0]).cross(q[2] - q[0]) + (q[2] - q[0]).cross(q[3] - q[0]);
+        let q = if n.dot(facing) >= 0.0 {
+            q
+        } else {
+            [q[0], q[3], q[2], q[1]]
+        };
+        self.triangle([q[0], q[1], q[2]], albedo, emission);
+        self.triangle([q[0], q[2], q[3]], albedo, emission);
+    }
+
+    /// Adds a quad whose front faces away from `inside` (a point inside a closed block).
+    fn quad_away_from(&mut self, q: [DVec3; 4], inside: DVec3, albedo: [f64; 3]) {
+        let centre = (q[0] + q[1] + q[2] + q[3]) * 0.25;
+        self.quad(q, centre - inside, albedo, [0.0; 3]);
+    }
+
+    /// Adds an axis-aligned rectangular grid of `n x m` quads in the plane `axis = level`,
+    /// spanning `[u0, u1] x [v0, v1]` in the two other axes (cyclic order after `axis`), facing
+    /// `facing`. Cells run row by row, `u` fastest.
+    #[allow(clippy::too_many_arguments)]
+    fn grid(
+        &mut self,
+        axis: usize,
+        level: f64,
+        (u0, u1, n): (f64, f64, usize),
+        (v0, v1, m): (f64, f64, usize),
+        facing: DVec3,
+        albedo: [f64; 3],
+        emission: [f64; 3],
+    ) {
+        let point = |u: f64, v: f64| {
+            let mut p = [0.0; 3];
+            p[axis] = level;
+            p[(axis + 1) % 3] = u;
+            p[(axis + 2) % 3] = v;
+            DVec3::from_array(p)
+        };
+        let us: Vec<f64> = (0..=n).map(|i| lerp_steps(u0, u1, i, n)).collect();
+        let vs: Vec<f64> = (0..=m).map(|j| lerp_steps(v0, v1, j, m)).collect();
+        for j in 0..m {
+            for i in 0..n {
+                let q = [
+                    point(us[i], vs[j]),
+                    point(us[i + 1], vs[j]),
+                    point(us[i + 1], vs[j + 1]),
+                    point(us[i], vs[j + 1]),
+                ];
+                self.quad(q, facing, albedo, emission);
+            }
+        }
+    }
+
+    fn build(self) -> Scene {
+        Scene::from_triangles(&self.corners, &self.albedo, &self.emission)
+    }
+}
+
+/// `a + (b - a) * i / n` computed so that both ends are exact.
+fn lerp_steps(a: f64, b: f64, i: usize, n: usize) -> f64 {
+    if i == 0 {
+        a
+    } else if i == n {
+        b
+    } else {
+        (a * (n - i) as f64 + b * i as f64) / n as f64
+    }
+}
+
+fn v(x: f64, y: f64, z: f64) -> DVec3 {
+    DVec3::new(x, y, z)
+}
+
+/// The Cornell box, from the geometry published by the Cornell University Program of Computer
+/// Graphics (<https://www.graphics.cornell.edu/online/box/data.html>), in millimetres.
+///
+/// Coordinates are the published vertex lists: floor (y = 0), ceiling (y = 548.8), back wall
+/// (z = 559.2), red wall (x ~ 550..556, slightly non-planar as published: its quad is split into
+/// two planar triangles), green wall (x = 0), the short block (165 mm tall) and the tall block
+/// (330 mm tall), each as its five published faces (no bottom), and the light, the published
+/// 130 x 105 mm rectangle `343.0 548.8 227.0 .. 213.0 548.8 332.0`. The front (z = 0, where the
+/// published camera at (278, 273, -800) looks in along +z) is open, as published.
+///
+/// Choices not fixed by the published data:
+/// - The ceiling has a hole exactly where the light is: it is the 3 x 3 grid of rectangles cut by
+///   the light's edges, minus the centre one, and the light fills the hole in the ceiling plane
+///   (y = 548.8), facing down. Ceiling and light do not overlap, and no two parallel surfaces are
+///   a fraction of a millimetre apart.
+/// - RGB reflectances instead of the measured spectra: white [`CORNELL_WHITE`] =
+///   (0.725, 0.71, 0.68), red [`CORNELL_RED`] = (0.63, 0.065, 0.05), green [`CORNELL_GREEN`] =
+///   (0.14, 0.45, 0.091), the light [`CORNELL_LIGHT_ALBEDO`] = 0.78 grey; emitted radiance
+///   [`CORNELL_LIGHT_EMISSION`] = (17, 12, 4) (the values common RGB renditions of the box use).
+///
+/// Orientation: walls, floor, ceiling and light face the inside of the box; the blocks' faces face
+/// outward. Triangle order is given by [`CORNELL_BOX_PARTS`] (46 triangles).
+pub fn cornell_box() -> Scene {
+    let mut b = Builder::default();
+    let white = CORNELL_WHITE;
+    let black = [0.0; 3];
+    // Direction tests use the centre of the box: walls face it.
+    let centre = v(278.0, 274.4, 279.6);
+    let wall = |b: &mut Builder, q: [DVec3; 4], albedo: [f64; 3]| {
+        let c = (q[0] + q[1] + q[2] + q[3]) * 0.25;
+        b.quad(q, centre - c, albedo, black);
+    };
+
+    // Floor.
+    wall(
+        &mut b,
+        [
+            v(552.8, 0.0, 0.0),
+            v(0.0, 0.0, 0.0),
+            v(0.0, 0.0, 559.2),
+            v(549.6, 0.0, 559.2),
+        ],
+        white,
+    );
+
+    // Ceiling with a hole for the light: a 3 x 3 grid minus its centre cell.
+    let xs = [556.0, 343.0, 213.0, 0.0];
+    let zs = [0.0, 227.0, 332.0, 559.2];
+    for j in 0..3 {
+        for i in 0..3 {
+            if (i, j) == (1, 1) {
+                continue;
+            }
+            wall(
+                &mut b,
+                [
+                    v(xs[i], 548.8, zs[j]),
+                    v(xs[i], 548.8, zs[j + 1]),
+                    v(xs[i + 1], 548.8, zs[j + 1]),
+                    v(xs[i + 1], 548.8, zs[j]),
+                ],
+                white,
+            );
+        }
+    }
+
+    // Light, in the ceiling's hole, facing down.
+    b.quad(
+        [
+            v(343.0, 548.8, 227.0),
+            v(343.0, 548.8, 332.0),
+            v(213.0, 548.8, 332.0),
+            v(213.0, 548.8, 227.0),
+        ],
+        v(0.0, -1.0, 0.0),
+        CORNELL_LIGHT_ALBEDO,
+        CORNELL_LIGHT_EMISSION,
+    );
+
+    // Back wall.
+    wall(
+        &mut b,
+        [
+            v(549.6, 0.0, 559.2),
+            v(0.0, 0.0, 559.2),
+            v(0.0, 548.8, 559.2),
+            v(556.0, 548.8, 559.2),
+        ],
+        white,
+    );
+
+    // Red wall (left in the published camera's view).
+    wall(
+        &mut b,
+        [
+            v(552.8, 0.0, 0.0),
+            v(549.6, 0.0, 559.2),
+            v(556.0, 548.8, 559.2),
+            v(556.0, 548.8, 0.0),
+        ],
+        CORNELL_RED,
+    );
+
+    // Green wall (right in the published camera's view).
+    wall(
+        &mut b,
+        [
+            v(0.0, 0.0, 559.2),
+            v(0.0, 0.0, 0.0),
+            v(0.0, 548.8, 0.0),
+            v(0.0, 548.8, 559.2),
+        ],
+        CORNELL_GREEN,
+    );
+
+    // Short block: top then four sides, as published; faces point away from the block's centre.
+    let short_top = [
+        v(130.0, 165.0, 65.0),
+        v(82.0, 165.0, 225.0),
+        v(240.0, 165.0, 272.0),
+        v(290.0, 165.0, 114.0),
+    ];
+    block(&mut b, short_top, [(3, 2), (0, 3), (1, 0), (2, 1)], white);
+
+    // Tall block.
+    let tall_top = [
+        v(423.0, 330.0, 247.0),
+        v(265.0, 330.0, 296.0),
+        v(314.0, 330.0, 456.0),
+        v(472.0, 330.0, 406.0),
+    ];
+    block(&mut b, tall_top, [(0, 3), (3, 2), (2, 1), (1, 0)], white);
+
+    b.build()
+}
+
+/// Adds a block standing on y = 0 with the given top face: the top, then the four sides, the side
+/// under top edge `(a, c)` being `floor(a), a, c, floor(c)` as the published data lists them, all
+/// facing away from the block's centre.
+fn block(b: &mut Builder, top: [DVec3; 4], sides: [(usize, usize); 4], albedo: [f64; 3]) {
+    let h = top[0].y;
+    let centre = (top[0] + top[1] + top[2] + top[3]) * 0.25 - v(0.0, h * 0.5, 0.0);
+    b.quad_away_from(top, centre, albedo);
+    let floor = |p: DVec3| v(p.x, 0.0, p.z);
+    for (a, c) in sides {
+        let (pa, pc) = (top[a], top[c]);
+        b.quad_away_from([floor(pa), pa, pc, floor(pc)], centre, albedo);
+    }
+}
+
+/// Floor cells per side in [`occluder_scene`].
+pub const OCCLUDER_FLOOR_CELLS: usize = 12;
+
+/// A light, an occluding plate and a floor that receives the plate's shadow; open (no walls), in
+/// metres.
+///
+/// - Light: the 1 x 1 square `[-0.5, 0.5] x [-0.5, 0.5]` (x, z) at y = 1.5, facing down, emitted
+///   radiance 1 (grey), albedo 0. Triangles 0..2.
+/// - Plate: a one-sided 0.6 x 0.6 square `[-0.3, 0.3]^2` at y = 0.5, facing up (towards the
+///   light), albedo 0.5 grey. Triangles 2..4. Its back absorbs; by itself it casts the shadow.
+/// - Floor: `[-1.5, 1.5]^2` at y = 0, facing up, albedo 0.5 grey, split into
+///   [`OCCLUDER_FLOOR_CELLS`]^2 squares of 0.25 (two triangles each; cells ordered by x, then z), so
+///   the shadow shows in per-triangle results: umbra within |x|, |z| <= 0.2 of the centre,
+///   penumbra out to 0.7, fully lit beyond.
+pub fn occluder_scene() -> Scene {
+    let mut b = Builder::default();
+    let up = v(0.0, 1.0, 0.0);
+    // Grids in the plane y = level: axis 1, u = z, v = x.
+    b.grid(
+        1,
+        1.5,
+        (-0.5, 0.5, 1),
+        (-0.5, 0.5, 1),
+        -up,
+        [0.0; 3],
+        [1.0; 3],
+    );
+    b.grid(
+        1,
+        0.5,
+        (-0.3, 0.3, 1),
+        (-0.3, 0.3, 1),
+        up,
+        [0.5; 3],
+        [0.0; 3],
+    );
+    let n = OCCLUDER_FLOOR_CELLS;
+    b.grid(
+        1,
+        0.0,
+        (-1.5, 1.5, n),
+        (-1.5, 1.5, n),
+        up,
+        [0.5; 3],
+        [0.0; 3],
+    );
+    b.build()
+}
+
+/// A closed unit cube `[0, 1]^3` facing inward (12 triangles), whose every triangle emits
+/// `emission` and reflects `albedo` (grey): the furnace test, B = E / (1 - rho) everywhere.
+///
+/// The mesh is closed and consistently oriented: every edge is shared by exactly two triangles
+/// that traverse it in opposite directions. Values are stored as given (no range check; the
+/// loader and [`write_obj`] reject albedo outside [0, 1) and negative emission).
+pub fn furnace_box(emission: f64, albedo: f64) -> Scene {
+    let mut b = Builder::default();
+    let centre = DVec3::splat(0.5);
+    for axis in 0..3 {
+        for level in [0.0, 1.0] {
+            let mut facing = [0.0; 3];
+            facing[axis] = 0.5 - level;
+            b.grid(
+                axis,
+                level,
+                (0.0, 1.0, 1),
+                (0.0, 1.0, 1),
+                DVec3::from_array(facing),
+                [albedo; 3],
+                [emission; 3],
+            );
+        }
+    }
+    debug_assert!(b.corners.iter().all(|t| {
+        let n = (t[1] - t[0]).cross(t[2] - t[0]);
+        n.dot(centre - t[0]) > 0.0
+    }));
+    b.build()
+}
+
+/// Splits every triangle of `scene` uniformly into `k * k` triangles (the k-th subdivision of
+/// each edge), keeping order, orientation and materials: the pieces of input triangle t are
+/// triangles `t * k * k .. (t + 1) * k * k` of the result.
+///
+/// Points on an edge are computed from that edge's two end points only, in an order-independent
+/// way, so two triangles that share an edge get bit-identical points on it and a closed mesh
+/// stays closed. The result has no path and no warnings.
+///
+/// # Panics
+///
+/// When `k` is 0.
+pub fn subdivide(scene: &Scene, k: usize) -> Scene {
+    assert!(k >= 1, "subdivide: k must be at least 1");
+    let pieces = scene.len() * k * k;
+    let mut corners = Vec::with_capacity(pieces);
+    let mut albedo = Vec::with_capacity(pieces);
+    let mut emission = Vec::with_capacity(pieces);
+    let kf = k as f64;
+    for t in 0..scene.len() {
+        let [a, b, c] = scene.corners(t);
+        // Lattice point with integer barycentric weights (k - i - j, i, j).
+        let point = |i: usize, j: usize| -> DVec3 {
+            let w = k - i - j;
+            if w == k {
+                a
+            } else if i == k {
+                b
+            } else if j == k {
+                c
+            } else {
+                (a * w as f64 + b * i as f64 + c * j as f64) / kf
+            }
+        };
+        for j in 0..k {
+            for i in 0..k - j {
+                corners.push([point(i, j), point(i + 1, j), point(i, j + 1)]);
+                if i + j + 2 <= k {
+                    corners.push([point(i + 1, j), point(i + 1, j + 1), point(i, j + 1)]);
+                }
+            }
+        }
+        let added = corners.len() - albedo.len();
+        albedo.extend(std::iter::repeat_n(scene.albedo[t], added));
+        emission.extend(std::iter::repeat_n(scene.emission[t], added));
+    }
+    Scene::from_triangles(&corners, &albedo, &emission)
+}
+
+/// The [`cornell_box`] split uniformly (see [`subdivide`]) with the smallest k such that it has at
+/// least `target_triangles` triangles: `46 * k * k` triangles (k = 5 gives 1150, k = 75 gives
+/// 258 750, k = 148 gives 1 007 584). The same scene at growing sizes, for growth measurements.
+pub fn subdivided_cornell_box(target_triangles: usize) -> Scene {
+    let mut k = 1usize;
+    while CORNELL_BOX_TRIANGLES * k * k < target_triangles {
+        k += 1;
+    }
+    subdivide(&cornell_box(), k)
+}
+
+/// Writes `scene` as an OBJ file at `obj_path` plus an MTL file next to it (same name, extension
+/// `mtl`), so that [`crate::scene::load_obj`] with default options gives back the same triangles
+/// in the same order with the same albedo and emission.
+///
+/// Vertices are shared between triangles where their coordinates are bit-identical; numbers are
+/// written in Rust's shortest round-trip form, so they read back exactly. There is one material
+/// per distinct (albedo, emission) pair, named `m0`, `m1`, ... in order of first use, each with a
+/// `Kd` and a `Ke` line, and `usemtl` switches wherever the material changes. `title` becomes
+/// comment lines at the top of both files. The output depends only on the scene and the title.
+///
+/// Errors: [`Error::Parameter`] for an empty scene, a non-finite vertex, albedo outside [0, 1),
+/// negative or non-finite emission, or an `obj_path` without a file name or ending in `.mtl`;
+/// [`Error::Io`] when a file cannot be written.
+pub fn write_obj(scene: &Scene, obj_path: &Path, title: &str) -> Result<()> {
+    if scene.is_empty() {
+        return Err(Error::Parameter(
+            "write_obj: the scene has no triangles".into(),
+        ));
+    }
+    if scene.albedo.len() != scene.len() || scene.emission.len() != scene.len() {
+        return Err(Error::Parameter(
+            "write_obj: albedo or emission count differs from the triangle count".into(),
+        ));
+    }
+    for t in 0..scene.len() {
+        if scene.triangles[t]
+            .iter()
+            .any(|&i| i as usize >= scene.positions.len())
+        {
+            return Err(Error::Parameter(format!(
+                "write_obj: triangle {t} has a vertex index out of range"
+            )));
+        }
+        if !scene.corners(t).iter().all(|p| p.is_finite()) {
+            return Err(Error::Parameter(format!(
+                "write_obj: triangle {t} has a non-finite vertex"
+            )));
+        }
+        if !scene.albedo[t].iter().all(|&x| (0.0..1.0).contains(&x)) {
+            return Err(Error::Parameter(format!(
+                "write_obj: triangle {t} has albedo {:?} outside [0, 1)",
+                scene.albedo[t]
+            )));
+        }
+        if !scene.emission[t].iter().all(|&x| x.is_finite() && x >= 0.0) {
+            return Err(Error::Parameter(format!(
+                "write_obj: triangle {t} has emission {:?} (must be finite and >= 0)",
+                scene.emission[t]
+            )));
+        }
+    }
+    let file_name = obj_path
+        .file_name()
+        .ok_or_else(|| {
+            Error::Parameter(format!(
+                "write_obj: {} has no file name",
+                obj_path.display()
+            ))
+        })?
+        .to_string_lossy()
+        .into_owned();
+    let mtl_path = obj_path.with_extension("mtl");
+    if mtl_path == obj_path {
+        return Err(Error::Parameter(format!(
+            "write_obj: {} would be overwritten by its own MTL file",
+            obj_path.display()
+        )));
+    }
+    let mtl_name = mtl_path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| format!("{file_name}.mtl"));
+
+    let mut header = String::new();
+    for line in title.lines() {
+        let _ = writeln!(header, "# {line}");
+    }
+
+    // Materials in order of first use.
+    type Key = [u64; 6];
+    let key = |t: usize| -> Key {
+        let (a, e) = (scene.albedo[t], scene.emission[t]);
+        [a[0], a[1], a[2], e[0], e[1], e[2]].map(f64::to_bits)
+    };
+    let mut material_of: HashMap<Key, usize> = HashMap::new();
+    let mut materials: Vec<usize> = Vec::new(); // first triangle using each material
+    let mut tri_material = Vec::with_capacity(scene.len());
+    for t in 0..scene.len() {
+        let m = *material_of.entry(key(t)).or_insert_with(|| {
+            materials.push(t);
+            materials.len() - 1
+        });
+        tri_material.push(m);
+    }
+
+    // Vertices in order of first use, shared when bit-identical.
+    let mut vertex_of: HashMap<[u64; 3], u32> = HashMap::new();
+    let mut vertices: Vec<DVec3> = Vec::new();
+    let mut faces: Vec<[u32; 3]> = Vec::with_capacity(scene.len());
+    for t in 0..scene.len() {
+        let face = scene.corners(t).map(|p| {
+            *vertex_of
+                .entry(p.to_array().map(f64::to_bits))
+                .or_insert_with(|| {
+                    vertices.push(p);
+                    vertices.len() as u32
+                })
+        });
+        faces.push(face);
+    }
+
+    let mut mtl = header.clone();
+    let _ = writeln!(
+        mtl,
+        "# materials: {} (Kd = albedo, Ke = emitted radiance, RGB)",
+        materials.len()
+    );
+    for (m, &t) in materials.iter().enumerate() {
+        let (a, e) = (scene.albedo[t], scene.emission[t]);
+        let _ = writeln!(mtl, "\nnewmtl m{m}");
+        let _ = writeln!(mtl, "Kd {} {} {}", a[0], a[1], a[2]);
+        let _ = writeln!(mtl, "Ke {} {} {}", e[0], e[1], e[2]);
+    }
+
+    let mut obj = header;
+    let _ = writeln!(
+        obj,
+        "# vertices: {}, triangles: {}, materials: {}",
+        vertices.len(),
+        faces.len(),
+        materials.len()
+    );
+    let _ = writeln!(obj, "mtllib {mtl_name}");
+    for p in &vertices {
+        let _ = writeln!(obj, "v {} {} {}", p.x, p.y, p.z);
+    }
+    let mut current = usize::MAX;
+    for (t, f) in faces.iter().enumerate() {
+        if tri_material[t] != current {
+            current = tri_material[t];
+            let _ = writeln!(obj, "usemtl m{current}");
+        }
+        let _ = writeln!(obj, "f {} {} {}", f[0], f[1], f[2]);
+    }
+
+    std::fs::write(&mtl_path, mtl).map_err(|e| Error::io(&mtl_path, e))?;
+    std::fs::write(obj_path, obj).map_err(|e| Error::io(obj_path, e))?;
+    Ok(())
+}
