@@ -46,6 +46,7 @@ pub struct Prepared {
     /// Per element: area, unit normal, albedo, emission (normalized), patch.
     elem_area: Vec<f64>,
     elem_normal: Vec<DVec3>,
+    elem_center: Vec<DVec3>,
     elem_albedo: Vec<[f64; 3]>,
     elem_patch: Vec<u32>,
     /// Solver options the links were refined for.
@@ -58,6 +59,7 @@ pub struct Prepared {
 pub fn link_params(options: &SolverOptions) -> LinkParams {
     LinkParams {
         epsilon: options.epsilon,
+        max_split_depth: options.split_depth,
         ..LinkParams::default()
     }
 }
@@ -81,6 +83,7 @@ impl Prepared {
         let mut prepared = Prepared {
             elem_area: Vec::with_capacity(tree.elements.len()),
             elem_normal: Vec::with_capacity(tree.elements.len()),
+            elem_center: Vec::with_capacity(tree.elements.len()),
             elem_albedo: Vec::with_capacity(tree.elements.len()),
             elem_patch: Vec::with_capacity(tree.elements.len()),
             tree,
@@ -97,6 +100,7 @@ impl Prepared {
             let n = &prepared.tree.nodes[node as usize];
             prepared.elem_area.push(n.area);
             prepared.elem_normal.push(n.plane.map(|p| p.0).unwrap_or(DVec3::Z));
+            prepared.elem_center.push(n.centroid);
             prepared.elem_albedo.push(patches.albedo[n.patch as usize]);
             prepared.elem_patch.push(n.patch);
         }
@@ -161,7 +165,8 @@ impl Prepared {
         let tree = &self.tree;
         let links = &self.links;
         let bins = &self.bins;
-        let (elem_area, elem_normal, elem_albedo) = (&self.elem_area, &self.elem_normal, &self.elem_albedo);
+        let (elem_area, elem_normal, elem_albedo, elem_center) =
+            (&self.elem_area, &self.elem_normal, &self.elem_albedo, &self.elem_center);
         let inv_pi = 1.0 / std::f64::consts::PI;
 
         for iteration in 1..=options.max_iterations {
@@ -217,14 +222,21 @@ impl Prepared {
                         }
                     }
                     let n_e = elem_normal[e];
+                    let x_e = elem_center[e];
                     let mut node = tree.elements[e];
                     while node != NONE {
                         let range = links.cluster_start[node as usize] as usize
                             ..links.cluster_start[node as usize + 1] as usize;
                         for (l, i) in links.cluster[range.clone()].iter().zip(&intensity[range]) {
-                            let w = DVec3::new(l.w[0] as f64, l.w[1] as f64, l.w[2] as f64);
+                            // This element's own direction and distance from the sender.
+                            let v = x_e - DVec3::new(l.origin[0] as f64, l.origin[1] as f64, l.origin[2] as f64);
+                            let d2 = v.length_squared();
+                            if !(d2 > 0.0) {
+                                continue;
+                            }
+                            let w = v / d2.sqrt();
                             let cos = -n_e.dot(w);
-                            let g = l.inv_d2 as f64;
+                            let g = 1.0 / d2;
                             if cos > 0.0 {
                                 let k = cos * g * inv_pi;
                                 for c in 0..3 {
@@ -232,9 +244,10 @@ impl Prepared {
                                 }
                             }
                             if use_anti && (cos > 0.0 || two_sided) {
-                                let k = g / bins.solid_angle[l.bin as usize];
+                                let bin = bins.bin_of(w);
+                                let k = g / bins.solid_angle[bin];
                                 for c in 0..3 {
-                                    a_acc[l.bin as usize][c] += k * i[c];
+                                    a_acc[bin][c] += k * i[c];
                                 }
                             }
                         }

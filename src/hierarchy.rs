@@ -25,6 +25,8 @@ pub struct Node {
     pub radius: f64,
     /// Total area of the triangles below.
     pub area: f64,
+    /// Area-weighted centroid of the triangles below.
+    pub centroid: DVec3,
     /// Unit normal and offset (n . x) when every triangle below lies in one plane facing the same
     /// way; `None` otherwise.
     pub plane: Option<(DVec3, f64)>,
@@ -75,6 +77,7 @@ fn leaf_node(corners: Tri, patch: u32, parent: u32, split_depth: u8) -> Node {
         center,
         radius,
         area: geometry::area(&corners),
+        centroid: center,
         plane: Some((normal, normal.dot(corners[0]))),
         bounds: (lo, hi),
         first_child: NONE,
@@ -178,11 +181,14 @@ impl ClusterTree {
         let mut lo = DVec3::splat(f64::INFINITY);
         let mut hi = DVec3::splat(f64::NEG_INFINITY);
         let mut area = 0.0;
+        let mut moment = DVec3::ZERO;
         for c in children {
             lo = lo.min(c.bounds.0);
             hi = hi.max(c.bounds.1);
             area += c.area;
+            moment += c.centroid * c.area;
         }
+        let centroid = if area > 0.0 { moment / area } else { (lo + hi) * 0.5 };
         let center = (lo + hi) * 0.5;
         let radius = children
             .iter()
@@ -201,6 +207,7 @@ impl ClusterTree {
         node.center = center;
         node.radius = radius;
         node.area = area;
+        node.centroid = centroid;
         node.plane = plane;
     }
 

@@ -39,10 +39,11 @@ pub struct ClusterLink {
     pub sender: u32,
     /// Receiver node.
     pub receiver: u32,
-    /// Unit direction of travel, sender centre to receiver centre.
+    /// Unit direction of travel, sender centroid to receiver centroid.
     pub w: [f32; 3],
-    /// 1 / squared centre distance.
-    pub inv_d2: f32,
+    /// The sender's area-weighted centroid: receivers measure their own direction and distance
+    /// from it.
+    pub origin: [f32; 3],
     /// Direction bin of `w`.
     pub bin: u16,
 }
@@ -151,6 +152,11 @@ pub fn refine(
         if s == r {
             let node = &tree.nodes[s as usize];
             if node.is_leaf() {
+                // Recorded so that validation knows the pieces of this triangle, should it be split
+                // later, exchange nothing among themselves (they are coplanar).
+                if record_culled {
+                    culled_pairs.push((s, s));
+                }
                 continue;
             }
             let (first, count) = (node.first_child, node.child_count as u32);
@@ -174,12 +180,12 @@ pub fn refine(
             let omega_s = sphere_solid_angle(sn.radius, d - rn.radius);
             let omega_r = sphere_solid_angle(rn.radius, d - sn.radius);
             if omega_s <= limit && omega_r <= limit {
-                let w = (rn.center - sn.center) / d;
+                let w = (rn.centroid - sn.centroid).normalize_or_zero();
                 cluster.push(ClusterLink {
                     sender: s,
                     receiver: r,
                     w: [w.x as f32, w.y as f32, w.z as f32],
-                    inv_d2: (1.0 / (d * d)) as f32,
+                    origin: sn.centroid.as_vec3().to_array(),
                     bin: bins.bin_of(w) as u16,
                 });
                 continue;
@@ -228,6 +234,18 @@ pub fn refine(
     for i in 0..tree.nodes.len() {
         cluster_start[i + 1] += cluster_start[i];
     }
+
+    // A leaf recorded in an exact pair may have been split afterwards (by another pair): the pair
+    // then stands for all pairs of elements below its two nodes.
+    let mut exact_pairs: Vec<(u32, u32)> = exact_pairs
+        .into_iter()
+        .flat_map(|(s, r)| {
+            let (s0, s1) = tree.nodes[s as usize].elements;
+            let (r0, r1) = tree.nodes[r as usize].elements;
+            let elements = &tree.elements;
+            (r0..r1).flat_map(move |re| (s0..s1).map(move |se| (elements[se as usize], elements[re as usize])))
+        })
+        .collect();
 
     // Exact couplings, computed in parallel, grouped by receiver element.
     let element_of = |node: u32| tree.nodes[node as usize].elements.0;
@@ -281,6 +299,9 @@ pub fn validate(tree: &ClusterTree, links: &Links) -> Result<(), String> {
     let mut cover = |s: (u32, u32), r: (u32, u32)| {
         for a in s.0..s.1 {
             for b in r.0..r.1 {
+                if s == r && a == b {
+                    continue;
+                }
                 let c = &mut count[b as usize * n + a as usize];
                 *c = c.saturating_add(1);
             }

@@ -28,8 +28,13 @@ pub struct SolverOptions {
     pub clamp_negative: bool,
     /// Receiver quadrature points per side for near pairs (see [`CouplingParams`]).
     pub near_quadrature: usize,
-    /// Link refinement threshold of the hierarchical solver (see `links`); smaller is finer.
+    /// Link refinement threshold of the hierarchical solver: the largest solid angle either end
+    /// of a cluster link may subtend, in mean bins. 0.25..2; smaller is finer. 0 refines every
+    /// link down to element pairs (the dense solver's couplings).
     pub epsilon: f64,
+    /// Most times the hierarchical solver may split an input triangle in four where a near,
+    /// smaller neighbour needs it finer. 0..6; 0 keeps the input mesh.
+    pub split_depth: u8,
 }
 
 impl Default for SolverOptions {
@@ -50,6 +55,7 @@ impl SolverOptions {
             clamp_negative: true,
             near_quadrature: 6,
             epsilon: 0.5,
+            split_depth: 4,
         }
     }
 
@@ -103,8 +109,11 @@ impl SolverOptions {
                 self.near_quadrature
             )));
         }
-        if !(self.epsilon > 0.0 && self.epsilon.is_finite()) {
-            return Err(Error::Parameter(format!("--epsilon {} must be > 0", self.epsilon)));
+        if !(self.epsilon >= 0.0 && self.epsilon.is_finite()) {
+            return Err(Error::Parameter(format!("--epsilon {} must be >= 0", self.epsilon)));
+        }
+        if self.split_depth > 8 {
+            return Err(Error::Parameter(format!("--split-depth {} outside 0..=8", self.split_depth)));
         }
         Ok(())
     }

@@ -1,0 +1,97 @@
+//! Oracle tests: the hierarchical solver against the dense one, and the link structure's coverage.
+
+use antiradiance::dense::solve_dense;
+use antiradiance::hierarchical::{solve_hierarchical, Prepared};
+use antiradiance::links;
+use antiradiance::mesh::{build_patches, Patches};
+use antiradiance::progress::Progress;
+use antiradiance::scenes;
+use antiradiance::solution::{relative_error, Solution};
+use antiradiance::solve::SolverOptions;
+
+fn error(patches: &Patches, estimate: &Solution, truth: &Solution) -> f64 {
+    let emissive: Vec<bool> = patches.emission.iter().map(|e| e.iter().any(|&x| x > 0.0)).collect();
+    relative_error(&patches.area, &emissive, &estimate.patch_radiance, &truth.patch_radiance)
+}
+
+#[test]
+fn every_element_pair_is_covered_exactly_once() {
+    for (name, scene, max_edge) in [
+        ("occluder", scenes::occluder_scene(), None),
+        ("cornell", scenes::cornell_box(), Some(150.0)),
+    ] {
+        let patches = build_patches(&scene, max_edge);
+        for epsilon in [0.25, 1.0, 4.0] {
+            for two_sided in [false, true] {
+                let options = SolverOptions {
+                    epsilon,
+                    two_sided,
+                    ..SolverOptions::default()
+                };
+                let prepared = Prepared::new(&patches, &options, true);
+                prepared.tree.validate().unwrap();
+                assert!(prepared.element_count() <= 3000, "{name}: keep this test small");
+                links::validate(&prepared.tree, &prepared.links)
+                    .unwrap_or_else(|e| panic!("{name} epsilon {epsilon} two_sided {two_sided}: {e}"));
+            }
+        }
+    }
+}
+
+#[test]
+fn refined_to_element_pairs_equals_dense() {
+    for (name, scene, max_edge) in [
+        ("occluder", scenes::occluder_scene(), None),
+        ("cornell", scenes::cornell_box(), Some(200.0)),
+    ] {
+        let patches = build_patches(&scene, max_edge);
+        for two_sided in [false, true] {
+            let options = SolverOptions {
+                epsilon: 0.0,
+                two_sided,
+                max_iterations: 12,
+                tol: 1e-9,
+                clamp_negative: false,
+                ..SolverOptions::default()
+            };
+            let dense = solve_dense(&patches, &options, &Progress::hidden());
+            let hier = solve_hierarchical(&patches, &options, &Progress::hidden());
+            assert_eq!(dense.stats.iterations, hier.stats.iterations);
+            for (p, (a, b)) in dense.patch_radiance.iter().zip(&hier.patch_radiance).enumerate() {
+                for c in 0..3 {
+                    let scale = a[c].abs().max(1e-6);
+                    assert!(
+                        (a[c] - b[c]).abs() <= 1e-5 * scale,
+                        "{name} patch {p} channel {c}: dense {} hierarchical {}",
+                        a[c],
+                        b[c]
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn default_settings_agree_with_dense() {
+    for (name, scene, max_edge) in [
+        ("occluder", scenes::occluder_scene(), None),
+        ("cornell", scenes::cornell_box(), Some(60.0)),
+    ] {
+        let patches = build_patches(&scene, max_edge);
+        let options = SolverOptions::default();
+        let dense = solve_dense(&patches, &options, &Progress::hidden());
+        for split_depth in [0, 4] {
+            let options = SolverOptions { split_depth, ..options.clone() };
+            let hier = solve_hierarchical(&patches, &options, &Progress::hidden());
+            let err = error(&patches, &hier, &dense);
+            eprintln!("{name}: hierarchical (split depth {split_depth}) vs dense {err:.4} (patches {})", patches.len());
+            // On the same elements, cluster links may only cost the approximation of one exchange
+            // per link; with on-demand splitting the hierarchical solver resolves more than the
+            // dense one and may legitimately differ (compared against the path tracer elsewhere).
+            if split_depth == 0 {
+                assert!(err < 0.02, "{name}: hierarchical vs dense error {err}");
+            }
+        }
+    }
+}
