@@ -44,7 +44,7 @@ impl Default for SolverOptions {
 }
 
 impl SolverOptions {
-    /// Balanced speed and accuracy: 8 x 8 bins, epsilon 0.5 (the default).
+    /// Balanced speed and accuracy: 8 x 8 bins, epsilon 0.25 (the default).
     pub fn default_preset() -> Self {
         SolverOptions {
             bins: 8,
@@ -54,28 +54,28 @@ impl SolverOptions {
             antiradiance: true,
             clamp_negative: true,
             near_quadrature: 6,
-            epsilon: 0.5,
+            epsilon: 0.25,
             split_depth: 4,
         }
     }
 
-    /// Fastest: 6 x 6 bins, coarse links, looser tolerance.
+    /// Fastest: 6 x 6 bins, epsilon 0.5, looser tolerance.
     pub fn fast() -> Self {
         SolverOptions {
             bins: 6,
             tol: 3e-3,
-            epsilon: 1.0,
+            epsilon: 0.5,
             near_quadrature: 4,
             ..SolverOptions::default_preset()
         }
     }
 
-    /// Most accurate: 12 x 12 bins, fine links, tight tolerance.
+    /// Most accurate: 12 x 12 bins, epsilon 0.125, tight tolerance.
     pub fn accurate() -> Self {
         SolverOptions {
             bins: 12,
             tol: 3e-4,
-            epsilon: 0.25,
+            epsilon: 0.125,
             ..SolverOptions::default_preset()
         }
     }

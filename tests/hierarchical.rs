@@ -81,16 +81,24 @@ fn default_settings_agree_with_dense() {
         let patches = build_patches(&scene, max_edge);
         let options = SolverOptions::default();
         let dense = solve_dense(&patches, &options, &Progress::hidden());
-        for split_depth in [0, 4] {
-            let options = SolverOptions { split_depth, ..options.clone() };
+        let mut errors = Vec::new();
+        for (split_depth, epsilon) in [(0, 0.25), (0, 0.5), (4, 0.25)] {
+            let options = SolverOptions { split_depth, epsilon, ..options.clone() };
             let hier = solve_hierarchical(&patches, &options, &Progress::hidden());
             let err = error(&patches, &hier, &dense);
-            eprintln!("{name}: hierarchical (split depth {split_depth}) vs dense {err:.4} (patches {})", patches.len());
-            // On the same elements, cluster links may only cost the approximation of one exchange
-            // per link; with on-demand splitting the hierarchical solver resolves more than the
-            // dense one and may legitimately differ (compared against the path tracer elsewhere).
-            if split_depth == 0 {
-                assert!(err < 0.02, "{name}: hierarchical vs dense error {err}");
+            eprintln!(
+                "{name}: hierarchical (split depth {split_depth}, epsilon {epsilon}) vs dense {err:.4} (patches {})",
+                patches.len()
+            );
+            errors.push((split_depth, epsilon, err));
+        }
+        // On the same elements (no splitting), cluster links may only cost the approximation of
+        // one exchange per link; with on-demand splitting the hierarchical solver resolves more
+        // than the dense one and may legitimately differ (checked against the path tracer
+        // elsewhere).
+        for (split_depth, epsilon, err) in errors {
+            if split_depth == 0 && epsilon <= 0.25 {
+                assert!(err < 0.02, "{name} epsilon {epsilon}: hierarchical vs dense error {err}");
             }
         }
     }
