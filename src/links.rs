@@ -20,6 +20,10 @@ pub struct LinkParams {
     pub min_radius: f64,
     /// Most times one patch may be split in four. 0..6; 4 by default (256 pieces).
     pub max_split_depth: u8,
+    /// How much larger than the sender's the receiver's solid angle may be: receivers evaluate a
+    /// link with each element's own direction and distance, so their extent costs little
+    /// accuracy. 1..8; 4 by default.
+    pub receiver_factor: f64,
 }
 
 impl Default for LinkParams {
@@ -28,6 +32,7 @@ impl Default for LinkParams {
             epsilon: 0.5,
             min_radius: 0.01,
             max_split_depth: 4,
+            receiver_factor: 4.0,
         }
     }
 }
@@ -179,7 +184,7 @@ pub fn refine(
         if params.epsilon > 0.0 && gap > 0.0 {
             let omega_s = sphere_solid_angle(sn.radius, d - rn.radius);
             let omega_r = sphere_solid_angle(rn.radius, d - sn.radius);
-            if omega_s <= limit && omega_r <= limit {
+            if omega_s <= limit && omega_r <= params.receiver_factor * limit {
                 let w = (rn.centroid - sn.centroid).normalize_or_zero();
                 cluster.push(ClusterLink {
                     sender: s,
