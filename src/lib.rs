@@ -6,9 +6,13 @@
 
 pub mod bins;
 pub mod dense;
+pub mod driver;
 pub mod error;
 pub mod geometry;
 pub mod hierarchical;
+pub mod hierarchy;
+pub mod links;
+pub mod memory;
 pub mod mesh;
 pub mod output;
 pub mod progress;
