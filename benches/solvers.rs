@@ -22,7 +22,11 @@ use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 fn bench_scenes() -> Vec<(String, Patches)> {
     let mut out = Vec::new();
     let seed = [
-        ("room", "../shared/meshes/room_radiosity_small.obj", Some(3.65)),
+        (
+            "room",
+            "../shared/meshes/room_radiosity_small.obj",
+            Some(3.65),
+        ),
         ("bear", "../shared/meshes/bear.obj", None),
     ];
     for (name, path, emit_above) in seed {
@@ -31,8 +35,10 @@ fn bench_scenes() -> Vec<(String, Patches)> {
             eprintln!("skipping {name}: {} not present", path.display());
             continue;
         }
-        let mut options = SceneOptions::default();
-        options.emit_above = emit_above;
+        let mut options = SceneOptions {
+            emit_above,
+            ..SceneOptions::default()
+        };
         if emit_above.is_none() {
             // The bear has no emitter of its own: light it from above its bounds.
             if let Ok(scene) = load_obj(path, &options) {
@@ -56,15 +62,28 @@ fn stages(c: &mut Criterion) {
         let mut group = c.benchmark_group(format!("{name}/{}", patches.len()));
         group.sample_size(10);
         group.measurement_time(Duration::from_secs(20));
-        group.bench_function("hierarchy_build", |b| b.iter(|| ClusterTree::build(&patches)));
+        group.bench_function("hierarchy_build", |b| {
+            b.iter(|| ClusterTree::build(&patches))
+        });
         group.bench_function("link_refinement", |b| {
             b.iter_batched(
                 || ClusterTree::build(&patches),
-                |mut tree| links::refine(&mut tree, &bins, &link_params(&options), &options.coupling(), false),
+                |mut tree| {
+                    links::refine(
+                        &mut tree,
+                        &bins,
+                        &link_params(&options),
+                        &options.coupling(),
+                        false,
+                    )
+                },
                 criterion::BatchSize::LargeInput,
             )
         });
-        let one = SolverOptions { max_iterations: 1, ..options.clone() };
+        let one = SolverOptions {
+            max_iterations: 1,
+            ..options.clone()
+        };
         let mut prepared = Prepared::new(&patches, &one, false);
         group.bench_function("hierarchical_one_iteration", |b| {
             b.iter(|| prepared.solve(&patches, &Progress::hidden()))
@@ -73,12 +92,19 @@ fn stages(c: &mut Criterion) {
         group.bench_function("hierarchical_full_solve", |b| {
             b.iter(|| prepared.solve(&patches, &Progress::hidden()))
         });
-        group.bench_function(BenchmarkId::new("hierarchical_end_to_end", "build+links+solve"), |b| {
-            b.iter(|| Prepared::new(&patches, &options, false).solve(&patches, &Progress::hidden()))
-        });
+        group.bench_function(
+            BenchmarkId::new("hierarchical_end_to_end", "build+links+solve"),
+            |b| {
+                b.iter(|| {
+                    Prepared::new(&patches, &options, false).solve(&patches, &Progress::hidden())
+                })
+            },
+        );
         // The dense solver's full solve takes minutes at this size: one sweep (near-pair cache
         // plus one streamed pass over all pairs) is measured; multiply by the iteration count.
-        group.bench_function("dense_one_iteration", |b| b.iter(|| solve_dense(&patches, &one, &Progress::hidden())));
+        group.bench_function("dense_one_iteration", |b| {
+            b.iter(|| solve_dense(&patches, &one, &Progress::hidden()))
+        });
         group.finish();
     }
 }

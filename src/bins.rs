@@ -41,7 +41,10 @@ pub fn oct_decode(p: DVec2) -> DVec3 {
     let (x, y) = if z >= 0.0 {
         (p.x, p.y)
     } else {
-        ((1.0 - p.y.abs()) * p.x.signum(), (1.0 - p.x.abs()) * p.y.signum())
+        (
+            (1.0 - p.y.abs()) * p.x.signum(),
+            (1.0 - p.x.abs()) * p.y.signum(),
+        )
     };
     DVec3::new(x, y, z).normalize()
 }
@@ -139,7 +142,8 @@ mod tests {
     fn encode_decode_roundtrip() {
         for i in 0..200 {
             let t = i as f64 * 0.731;
-            let w = DVec3::new(t.sin() * (t * 0.3).cos(), (t * 1.7).cos(), (t * 0.9).sin()).normalize();
+            let w =
+                DVec3::new(t.sin() * (t * 0.3).cos(), (t * 1.7).cos(), (t * 0.9).sin()).normalize();
             let back = oct_decode(oct_encode(w));
             assert!((back - w).length() < 1e-9, "{w} -> {back}");
         }
@@ -154,7 +158,9 @@ mod tests {
             let n = 400_000;
             let mut state = 12345u64;
             let mut rnd = || {
-                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                state = state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
                 (state >> 11) as f64 / (1u64 << 53) as f64
             };
             for _ in 0..n {
@@ -167,7 +173,10 @@ mod tests {
                 let expect = bins.solid_angle[d] / (4.0 * std::f64::consts::PI);
                 let got = counts[d] as f64 / n as f64;
                 let sigma = (expect / n as f64).sqrt();
-                assert!((got - expect).abs() < 5.0 * sigma + 1e-4, "res {res} bin {d}: {got} vs {expect}");
+                assert!(
+                    (got - expect).abs() < 5.0 * sigma + 1e-4,
+                    "res {res} bin {d}: {got} vs {expect}"
+                );
             }
             assert!(bins.max_solid_angle / bins.min_solid_angle < 4.0);
         }

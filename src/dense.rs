@@ -11,7 +11,7 @@ use rayon::prelude::*;
 use crate::bins::Bins;
 use crate::mesh::Patches;
 use crate::progress::Progress;
-use crate::solution::{SolveStats, Solution};
+use crate::solution::{Solution, SolveStats};
 use crate::solve::{finish, relative_change, Convergence, SolverOptions};
 use crate::transport::{couple, is_near, Coupling, Entry, PatchGeom};
 
@@ -89,9 +89,17 @@ pub fn solve_dense(patches: &Patches, options: &SolverOptions, progress: &Progre
                     let b_s = radiance[s];
                     for e in entries {
                         let a_s = anti[s * nb + e.bin as usize];
-                        row += if params.two_sided { e.f_a } else { e.f_a + e.f_b } as f64;
+                        row += if params.two_sided {
+                            e.f_a
+                        } else {
+                            e.f_a + e.f_b
+                        } as f64;
                         for c in 0..3 {
-                            let a = if options.antiradiance { a_s[c] as f64 } else { 0.0 };
+                            let a = if options.antiradiance {
+                                a_s[c] as f64
+                            } else {
+                                0.0
+                            };
                             h[c] += e.f_b as f64 * b_s[c] - e.f_a as f64 * a;
                             a_acc[e.bin as usize][c] += e.o_b as f64 * b_s[c] - e.o_a as f64 * a;
                         }

@@ -170,6 +170,10 @@ pub struct SolverArgs {
     /// Iteration cap (the summary and the report say when it was reached).
     #[arg(long, value_name = "N")]
     pub max_iterations: Option<usize>,
+    /// Most times the hierarchical solver may split an input triangle in four where a smaller,
+    /// nearby object needs a finer receiver (0 keeps the input mesh; default 4).
+    #[arg(long, value_name = "D")]
+    pub split_depth: Option<u8>,
     /// Create antiradiance from light arriving at both sides of a surface (open scenes with
     /// back-lit one-sided surfaces); by default only the front side creates it.
     #[arg(long)]
@@ -195,6 +199,9 @@ impl SolverArgs {
         }
         if let Some(tol) = self.tol {
             options.tol = tol;
+        }
+        if let Some(depth) = self.split_depth {
+            options.split_depth = depth;
         }
         if let Some(n) = self.max_iterations {
             options.max_iterations = n;

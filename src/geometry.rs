@@ -109,11 +109,7 @@ impl Poly {
 /// Splits `tri` by the plane through `p` with normal `n` into the part strictly in front
 /// (`n . (y - p) > 0`) and the part behind. Points within `tol` of the plane count as on it.
 pub fn clip_by_plane(tri: &Tri, p: DVec3, n: DVec3, tol: f64) -> (Poly, Poly) {
-    let d = [
-        n.dot(tri[0] - p),
-        n.dot(tri[1] - p),
-        n.dot(tri[2] - p),
-    ];
+    let d = [n.dot(tri[0] - p), n.dot(tri[1] - p), n.dot(tri[2] - p)];
     let d = d.map(|x| if x.abs() <= tol { 0.0 } else { x });
     let mut front = Poly::default();
     let mut back = Poly::default();
@@ -210,10 +206,17 @@ mod tests {
 
     #[test]
     fn clip_splits_area() {
-        let tri = [DVec3::new(-1.0, 0.0, 0.0), DVec3::new(1.0, 0.0, 0.0), DVec3::new(0.0, 2.0, 0.0)];
+        let tri = [
+            DVec3::new(-1.0, 0.0, 0.0),
+            DVec3::new(1.0, 0.0, 0.0),
+            DVec3::new(0.0, 2.0, 0.0),
+        ];
         let (front, back) = clip_by_plane(&tri, DVec3::new(0.0, 1.0, 0.0), DVec3::Y, 0.0);
         let fa: f64 = front.triangles().map(|t| area(&t)).sum();
         let ba: f64 = back.triangles().map(|t| area(&t)).sum();
-        assert!((fa - 0.5).abs() < 1e-12 && (ba - 1.5).abs() < 1e-12, "{fa} {ba}");
+        assert!(
+            (fa - 0.5).abs() < 1e-12 && (ba - 1.5).abs() < 1e-12,
+            "{fa} {ba}"
+        );
     }
 }

@@ -20,7 +20,7 @@ use crate::hierarchy::{ClusterTree, NONE};
 use crate::links::{self, LinkParams, Links};
 use crate::mesh::Patches;
 use crate::progress::Progress;
-use crate::solution::{SolveStats, Solution};
+use crate::solution::{Solution, SolveStats};
 use crate::solve::{finish, Convergence, SolverOptions};
 
 /// Time spent in each stage of a hierarchical solve, seconds.
@@ -54,6 +54,10 @@ pub struct Prepared {
     /// Build timings.
     pub timings: HierarchyTimings,
 }
+
+/// A previous element state to start from: (radiance per element, antiradiance per element and
+/// bin).
+pub type WarmStart<'a> = (&'a [[f64; 3]], &'a [[f32; 3]]);
 
 /// The link parameters implied by solver options.
 pub fn link_params(options: &SolverOptions) -> LinkParams {
@@ -99,7 +103,9 @@ impl Prepared {
         for &node in &prepared.tree.elements {
             let n = &prepared.tree.nodes[node as usize];
             prepared.elem_area.push(n.area);
-            prepared.elem_normal.push(n.plane.map(|p| p.0).unwrap_or(DVec3::Z));
+            prepared
+                .elem_normal
+                .push(n.plane.map(|p| p.0).unwrap_or(DVec3::Z));
             prepared.elem_center.push(n.centroid);
             prepared.elem_albedo.push(patches.albedo[n.patch as usize]);
             prepared.elem_patch.push(n.patch);
@@ -124,7 +130,11 @@ impl Prepared {
     }
 
     /// Solves with the patches' own emission.
-    pub fn solve(&mut self, patches: &Patches, progress: &Progress) -> (Solution, Vec<[f64; 3]>, Vec<[f32; 3]>) {
+    pub fn solve(
+        &mut self,
+        patches: &Patches,
+        progress: &Progress,
+    ) -> (Solution, Vec<[f64; 3]>, Vec<[f32; 3]>) {
         self.solve_with_emission(patches, &patches.emission, None, progress)
     }
 
@@ -135,7 +145,7 @@ impl Prepared {
         &mut self,
         patches: &Patches,
         patch_emission: &[[f64; 3]],
-        warm: Option<(&[[f64; 3]], &[[f32; 3]])>,
+        warm: Option<WarmStart<'_>>,
         progress: &Progress,
     ) -> (Solution, Vec<[f64; 3]>, Vec<[f32; 3]>) {
         let t0 = Instant::now();
@@ -165,8 +175,12 @@ impl Prepared {
         let tree = &self.tree;
         let links = &self.links;
         let bins = &self.bins;
-        let (elem_area, elem_normal, elem_albedo, elem_center) =
-            (&self.elem_area, &self.elem_normal, &self.elem_albedo, &self.elem_center);
+        let (elem_area, elem_normal, elem_albedo, elem_center) = (
+            &self.elem_area,
+            &self.elem_normal,
+            &self.elem_albedo,
+            &self.elem_center,
+        );
         let inv_pi = 1.0 / std::f64::consts::PI;
 
         for iteration in 1..=options.max_iterations {
@@ -209,7 +223,8 @@ impl Prepared {
                     for l in links.exact_start[e]..links.exact_start[e + 1] {
                         let s = links.exact_sender[l as usize] as usize;
                         let b_s = radiance[s];
-                        let entries = &links.exact_entries[links.exact_entry_start[l as usize] as usize
+                        let entries = &links.exact_entries[links.exact_entry_start[l as usize]
+                            as usize
                             ..links.exact_entry_start[l as usize + 1] as usize];
                         for en in entries {
                             row += if two_sided { en.f_a } else { en.f_a + en.f_b } as f64;
@@ -217,7 +232,8 @@ impl Prepared {
                             for c in 0..3 {
                                 let a = if use_anti { a_s[c] as f64 } else { 0.0 };
                                 h[c] += en.f_b as f64 * b_s[c] - en.f_a as f64 * a;
-                                a_acc[en.bin as usize][c] += en.o_b as f64 * b_s[c] - en.o_a as f64 * a;
+                                a_acc[en.bin as usize][c] +=
+                                    en.o_b as f64 * b_s[c] - en.o_a as f64 * a;
                             }
                         }
                     }
@@ -229,7 +245,12 @@ impl Prepared {
                             ..links.cluster_start[node as usize + 1] as usize;
                         for (l, i) in links.cluster[range.clone()].iter().zip(&intensity[range]) {
                             // This element's own direction and distance from the sender.
-                            let v = x_e - DVec3::new(l.origin[0] as f64, l.origin[1] as f64, l.origin[2] as f64);
+                            let v = x_e
+                                - DVec3::new(
+                                    l.origin[0] as f64,
+                                    l.origin[1] as f64,
+                                    l.origin[2] as f64,
+                                );
                             let d2 = v.length_squared();
                             if !(d2 > 0.0) {
                                 continue;
@@ -265,7 +286,9 @@ impl Prepared {
                     (num, den, row)
                 })
                 .collect();
-            let (num, den) = change_parts.iter().fold((0.0, 0.0), |acc, p| (acc.0 + p.0, acc.1 + p.1));
+            let (num, den) = change_parts
+                .iter()
+                .fold((0.0, 0.0), |acc, p| (acc.0 + p.0, acc.1 + p.1));
             if iteration == 1 {
                 stats.max_row_sum = change_parts.iter().map(|p| p.2).fold(0.0, f64::max);
             }
@@ -308,7 +331,11 @@ impl Prepared {
 }
 
 /// Solves the scene with the hierarchical solver. Preconditions: `options.validate()` passed.
-pub fn solve_hierarchical(patches: &Patches, options: &SolverOptions, progress: &Progress) -> Solution {
+pub fn solve_hierarchical(
+    patches: &Patches,
+    options: &SolverOptions,
+    progress: &Progress,
+) -> Solution {
     let mut prepared = Prepared::new(patches, options, false);
     prepared.solve(patches, progress).0
 }

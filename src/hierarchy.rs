@@ -70,7 +70,10 @@ pub struct ClusterTree {
 fn leaf_node(corners: Tri, patch: u32, parent: u32, split_depth: u8) -> Node {
     let normal = geometry::normal(&corners).unwrap_or(DVec3::Z);
     let center = geometry::centroid(&corners);
-    let radius = corners.iter().map(|c| (*c - center).length()).fold(0.0, f64::max);
+    let radius = corners
+        .iter()
+        .map(|c| (*c - center).length())
+        .fold(0.0, f64::max);
     let lo = corners[0].min(corners[1]).min(corners[2]);
     let hi = corners[0].max(corners[1]).max(corners[2]);
     Node {
@@ -99,11 +102,15 @@ impl ClusterTree {
         let active: Vec<u32> = (0..patches.len() as u32)
             .filter(|&p| patches.active[p as usize])
             .collect();
-        assert!(!active.is_empty(), "a scene needs at least one non-degenerate patch");
+        assert!(
+            !active.is_empty(),
+            "a scene needs at least one non-degenerate patch"
+        );
         let mut tree = ClusterTree::default();
         if active.len() == 1 {
             let p = active[0];
-            tree.nodes.push(leaf_node(patches.corners[p as usize], p, NONE, 0));
+            tree.nodes
+                .push(leaf_node(patches.corners[p as usize], p, NONE, 0));
             return tree;
         }
         let tris: Vec<obvhs::triangle::Triangle> = active
@@ -125,13 +132,20 @@ impl ClusterTree {
         tree.bvh_time = bvh_time;
 
         // Copy the BVH into our own arrays: children contiguous, leaves are patches.
-        tree.nodes.push(leaf_node(patches.corners[active[0] as usize], NONE, NONE, 0));
+        tree.nodes.push(leaf_node(
+            patches.corners[active[0] as usize],
+            NONE,
+            NONE,
+            0,
+        ));
         let mut stack = vec![(0usize, 0u32)]; // (bvh node, our node)
         while let Some((b, ours)) = stack.pop() {
             let node = &bvh.nodes[b];
             if node.prim_count > 0 {
                 let prims: Vec<u32> = (0..node.prim_count)
-                    .map(|k| active[bvh.primitive_indices[(node.first_index + k) as usize] as usize])
+                    .map(|k| {
+                        active[bvh.primitive_indices[(node.first_index + k) as usize] as usize]
+                    })
                     .collect();
                 if prims.len() == 1 {
                     let parent = tree.nodes[ours as usize].parent;
@@ -140,7 +154,8 @@ impl ClusterTree {
                 } else {
                     let first = tree.nodes.len() as u32;
                     for &p in &prims {
-                        tree.nodes.push(leaf_node(patches.corners[p as usize], p, ours, 0));
+                        tree.nodes
+                            .push(leaf_node(patches.corners[p as usize], p, ours, 0));
                     }
                     let n = &mut tree.nodes[ours as usize];
                     n.first_child = first;
@@ -176,7 +191,10 @@ impl ClusterTree {
     }
 
     fn refit(&mut self, i: usize) {
-        let (first, count) = (self.nodes[i].first_child as usize, self.nodes[i].child_count as usize);
+        let (first, count) = (
+            self.nodes[i].first_child as usize,
+            self.nodes[i].child_count as usize,
+        );
         let children = &self.nodes[first..first + count];
         let mut lo = DVec3::splat(f64::INFINITY);
         let mut hi = DVec3::splat(f64::NEG_INFINITY);
@@ -188,7 +206,11 @@ impl ClusterTree {
             area += c.area;
             moment += c.centroid * c.area;
         }
-        let centroid = if area > 0.0 { moment / area } else { (lo + hi) * 0.5 };
+        let centroid = if area > 0.0 {
+            moment / area
+        } else {
+            (lo + hi) * 0.5
+        };
         let center = (lo + hi) * 0.5;
         let radius = children
             .iter()

@@ -4,6 +4,9 @@
 //! -> [`transport`] (pair couplings over [`bins`]) -> [`dense`] / hierarchical solvers ->
 //! [`output`]. [`reference`] is an independent path tracer used as ground truth.
 
+// `!(x > 0.0)` is used on purpose: it is also true for NaN, which must be rejected too.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod bins;
 pub mod dense;
 pub mod driver;

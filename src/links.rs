@@ -130,7 +130,11 @@ fn culled(tree: &ClusterTree, s: u32, r: u32, two_sided: bool) -> bool {
     }
     // Coplanar flat clusters exchange nothing in either mode.
     if let Some((n2, d2)) = sn.plane {
-        if n.dot(n2).abs() > 1.0 - 1e-9 && (n.dot(n2) * d2 - d).abs() <= tol && max_dist <= tol && min_dist >= -tol {
+        if n.dot(n2).abs() > 1.0 - 1e-9
+            && (n.dot(n2) * d2 - d).abs() <= tol
+            && max_dist <= tol
+            && min_dist >= -tol
+        {
             return true;
         }
     }
@@ -248,7 +252,9 @@ pub fn refine(
             let (s0, s1) = tree.nodes[s as usize].elements;
             let (r0, r1) = tree.nodes[r as usize].elements;
             let elements = &tree.elements;
-            (r0..r1).flat_map(move |re| (s0..s1).map(move |se| (elements[se as usize], elements[re as usize])))
+            (r0..r1).flat_map(move |re| {
+                (s0..s1).map(move |se| (elements[se as usize], elements[re as usize]))
+            })
         })
         .collect();
 
@@ -280,12 +286,16 @@ pub fn refine(
             }
             continue;
         }
-        links.exact_entry_start.push(links.exact_entries.len() as u32);
+        links
+            .exact_entry_start
+            .push(links.exact_entries.len() as u32);
         links.exact_entries.extend_from_slice(entries);
         links.exact_sender.push(element_of(s));
         links.exact_start[element_of(r) as usize + 1] += 1;
     }
-    links.exact_entry_start.push(links.exact_entries.len() as u32);
+    links
+        .exact_entry_start
+        .push(links.exact_entries.len() as u32);
     for e in 0..n_elements {
         links.exact_start[e + 1] += links.exact_start[e];
     }
@@ -313,10 +323,16 @@ pub fn validate(tree: &ClusterTree, links: &Links) -> Result<(), String> {
         }
     };
     for l in &links.cluster {
-        cover(tree.nodes[l.sender as usize].elements, tree.nodes[l.receiver as usize].elements);
+        cover(
+            tree.nodes[l.sender as usize].elements,
+            tree.nodes[l.receiver as usize].elements,
+        );
     }
     for &(s, r) in &links.culled {
-        cover(tree.nodes[s as usize].elements, tree.nodes[r as usize].elements);
+        cover(
+            tree.nodes[s as usize].elements,
+            tree.nodes[r as usize].elements,
+        );
     }
     for r in 0..n {
         for l in links.exact_start[r]..links.exact_start[r + 1] {

@@ -71,12 +71,23 @@ impl Patches {
     }
 
     /// Appends one patch; `corners` in the unit frame.
-    pub fn push(&mut self, corners: Tri, parent: u32, albedo: [f64; 3], emission: [f64; 3], active: bool) {
+    pub fn push(
+        &mut self,
+        corners: Tri,
+        parent: u32,
+        albedo: [f64; 3],
+        emission: [f64; 3],
+        active: bool,
+    ) {
         let n = geometry::normal(&corners);
         let active = active && n.is_some();
         self.corners.push(corners);
         self.normal.push(n.unwrap_or(DVec3::ZERO));
-        self.area.push(if active { geometry::area(&corners) } else { 0.0 });
+        self.area.push(if active {
+            geometry::area(&corners)
+        } else {
+            0.0
+        });
         self.centroid.push(geometry::centroid(&corners));
         self.parent.push(parent);
         self.albedo.push(albedo);
@@ -134,7 +145,11 @@ pub fn build_patches(scene: &Scene, max_edge: Option<f64>) -> Patches {
         .iter()
         .flat_map(|e| e.iter().copied())
         .fold(0.0f64, f64::max);
-    let emission_scale = if emission_max > 0.0 { emission_max } else { 1.0 };
+    let emission_scale = if emission_max > 0.0 {
+        emission_max
+    } else {
+        1.0
+    };
 
     let mut patches = Patches {
         frame,
@@ -148,9 +163,10 @@ pub fn build_patches(scene: &Scene, max_edge: Option<f64>) -> Patches {
         let emission = scene.emission[t].map(|e| e / emission_scale);
         let active = !scene.is_degenerate(t);
         let k = match max_edge {
-            Some(l) if l > 0.0 && l.is_finite() && active => {
-                (geometry::longest_edge(&world) / l).ceil().clamp(1.0, 1024.0) as usize
-            }
+            Some(l) if l > 0.0 && l.is_finite() && active => (geometry::longest_edge(&world) / l)
+                .ceil()
+                .clamp(1.0, 1024.0)
+                as usize,
             _ => 1,
         };
         for piece in geometry::subdivide(&unit, k) {

@@ -39,7 +39,11 @@ pub struct Solution {
 
 impl Solution {
     /// Builds a solution from per-patch radiance given in the patches' normalized emission units.
-    pub fn from_normalized(patches: &Patches, normalized: &[[f64; 3]], stats: SolveStats) -> Solution {
+    pub fn from_normalized(
+        patches: &Patches,
+        normalized: &[[f64; 3]],
+        stats: SolveStats,
+    ) -> Solution {
         let patch_radiance: Vec<[f64; 3]> = normalized
             .iter()
             .map(|b| b.map(|x| sanitize(x * patches.emission_scale)))

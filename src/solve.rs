@@ -5,7 +5,7 @@ use serde::Serialize;
 
 use crate::error::{Error, Result};
 use crate::mesh::Patches;
-use crate::solution::{sanitize, SolveStats, Solution};
+use crate::solution::{sanitize, Solution, SolveStats};
 use crate::transport::CouplingParams;
 
 /// Parameters of an antiradiance solve.
@@ -95,13 +95,21 @@ impl SolverOptions {
     /// Checks every field's range.
     pub fn validate(&self) -> Result<()> {
         if !(1..=64).contains(&self.bins) {
-            return Err(Error::Parameter(format!("--bins {} outside 1..=64", self.bins)));
+            return Err(Error::Parameter(format!(
+                "--bins {} outside 1..=64",
+                self.bins
+            )));
         }
         if !(self.tol > 0.0 && self.tol < 1.0) {
-            return Err(Error::Parameter(format!("--tol {} outside (0, 1)", self.tol)));
+            return Err(Error::Parameter(format!(
+                "--tol {} outside (0, 1)",
+                self.tol
+            )));
         }
         if self.max_iterations == 0 {
-            return Err(Error::Parameter("--max-iterations must be at least 1".into()));
+            return Err(Error::Parameter(
+                "--max-iterations must be at least 1".into(),
+            ));
         }
         if !(1..=16).contains(&self.near_quadrature) {
             return Err(Error::Parameter(format!(
@@ -110,10 +118,16 @@ impl SolverOptions {
             )));
         }
         if !(self.epsilon >= 0.0 && self.epsilon.is_finite()) {
-            return Err(Error::Parameter(format!("--epsilon {} must be >= 0", self.epsilon)));
+            return Err(Error::Parameter(format!(
+                "--epsilon {} must be >= 0",
+                self.epsilon
+            )));
         }
         if self.split_depth > 8 {
-            return Err(Error::Parameter(format!("--split-depth {} outside 0..=8", self.split_depth)));
+            return Err(Error::Parameter(format!(
+                "--split-depth {} outside 0..=8",
+                self.split_depth
+            )));
         }
         Ok(())
     }
@@ -206,7 +220,11 @@ pub fn finish(
         }
         negative_patches += neg as usize;
     }
-    stats.negative_fraction = if positive > 0.0 { negative / positive } else { 0.0 };
+    stats.negative_fraction = if positive > 0.0 {
+        negative / positive
+    } else {
+        0.0
+    };
     stats.negative_patches = negative_patches;
     Solution::from_normalized(patches, &radiance, stats)
 }

@@ -195,7 +195,14 @@ struct Spread {
 }
 
 impl Spread {
-    fn new(x: DVec3, n_x: DVec3, front: &Poly, back: &Poly, bins: &Bins, params: &CouplingParams) -> Spread {
+    fn new(
+        x: DVec3,
+        n_x: DVec3,
+        front: &Poly,
+        back: &Poly,
+        bins: &Bins,
+        params: &CouplingParams,
+    ) -> Spread {
         let mut spread = Spread {
             point: x,
             front: PointBins::new(),
@@ -215,7 +222,11 @@ impl Spread {
             for e in list.iter_mut() {
                 // Where the form factor vanishes at this point (grazing), share it like the
                 // solid angle.
-                e.1 = if f_total > 0.0 { e.1 / f_total } else { e.2 / w_total.max(f64::MIN_POSITIVE) };
+                e.1 = if f_total > 0.0 {
+                    e.1 / f_total
+                } else {
+                    e.2 / w_total.max(f64::MIN_POSITIVE)
+                };
                 e.2 = if w_total > 0.0 { e.2 / w_total } else { 0.0 };
             }
         }
@@ -259,10 +270,21 @@ pub fn couple(
     let q = receiver_quadrature(separation(r, s), params.near_quadrature);
     let q_spread = q.min(2);
     let spreads: SmallVec<[Spread; 4]> = if q_spread == 1 {
-        smallvec::smallvec![Spread::new(r.centroid, r.normal, &front, &back, bins, params)]
+        smallvec::smallvec![Spread::new(
+            r.centroid, r.normal, &front, &back, bins, params
+        )]
     } else {
         geometry::subdivide(&r.corners, q_spread)
-            .map(|t| Spread::new(geometry::centroid(&t), r.normal, &front, &back, bins, params))
+            .map(|t| {
+                Spread::new(
+                    geometry::centroid(&t),
+                    r.normal,
+                    &front,
+                    &back,
+                    bins,
+                    params,
+                )
+            })
             .collect()
     };
     let weight = 1.0 / (q * q) as f64;
@@ -354,7 +376,10 @@ mod tests {
             for s in &send {
                 couple(&geom(*r), &geom(*s), bins, &params, &mut out);
                 let f: f64 = out.iter().map(|e| e.f_b as f64).sum();
-                assert!(out.iter().all(|e| e.f_a == 0.0), "front-facing: no antiradiance read");
+                assert!(
+                    out.iter().all(|e| e.f_a == 0.0),
+                    "front-facing: no antiradiance read"
+                );
                 total += f * geometry::area(r);
             }
         }
@@ -365,7 +390,8 @@ mod tests {
     fn parallel_squares() {
         let bins = Bins::new(8);
         let f = square_ff(square(0.0, true), square(1.0, false), &bins);
-        eprintln!("par {f}"); assert!((f - 0.19982).abs() < 0.01 * 0.19982, "{f}");
+        eprintln!("par {f}");
+        assert!((f - 0.19982).abs() < 0.01 * 0.19982, "{f}");
     }
 
     #[test]
@@ -382,7 +408,8 @@ mod tests {
         let wall = [[a, b, c], [a, c, d]];
         assert!(geometry::normal(&wall[0]).unwrap().y > 0.9);
         let f = square_ff(floor, wall, &bins);
-        eprintln!("perp {f}"); assert!((f - 0.20004).abs() < 0.01 * 0.20004, "{f}");
+        eprintln!("perp {f}");
+        assert!((f - 0.20004).abs() < 0.01 * 0.20004, "{f}");
     }
 
     #[test]
@@ -412,7 +439,13 @@ mod tests {
         let bins = Bins::new(8);
         let sq = square(0.0, true);
         let mut out = Coupling::new();
-        couple(&geom(sq[0]), &geom(sq[1]), &bins, &CouplingParams::default(), &mut out);
+        couple(
+            &geom(sq[0]),
+            &geom(sq[1]),
+            &bins,
+            &CouplingParams::default(),
+            &mut out,
+        );
         assert!(out.is_empty());
     }
 }

@@ -15,7 +15,12 @@ use glam::DVec3;
 fn error(scene: &Scene, estimate: &Solution, truth: &Solution) -> f64 {
     let areas: Vec<f64> = (0..scene.len()).map(|t| scene.area(t)).collect();
     let emissive: Vec<bool> = (0..scene.len()).map(|t| scene.is_emitter(t)).collect();
-    relative_error(&areas, &emissive, &estimate.triangle_radiance, &truth.triangle_radiance)
+    relative_error(
+        &areas,
+        &emissive,
+        &estimate.triangle_radiance,
+        &truth.triangle_radiance,
+    )
 }
 
 fn hidden() -> Progress {
@@ -28,15 +33,24 @@ fn furnace_dense_and_hierarchical() {
         let scene = scenes::furnace_box(emission, albedo);
         let patches = build_patches(&scene, Some(0.25));
         let expect = emission / (1.0 - albedo);
-        let options = SolverOptions { tol: 1e-5, ..SolverOptions::default() };
+        let options = SolverOptions {
+            tol: 1e-5,
+            ..SolverOptions::default()
+        };
         for (name, solution) in [
             ("dense", solve_dense(&patches, &options, &hidden())),
-            ("hierarchical", solve_hierarchical(&patches, &options, &hidden())),
+            (
+                "hierarchical",
+                solve_hierarchical(&patches, &options, &hidden()),
+            ),
         ] {
             assert!(solution.stats.converged, "{name}");
             for b in &solution.triangle_radiance {
                 for &x in b {
-                    assert!((x - expect).abs() < 0.005 * expect, "{name}: B = {x}, expected {expect}");
+                    assert!(
+                        (x - expect).abs() < 0.005 * expect,
+                        "{name}: B = {x}, expected {expect}"
+                    );
                 }
             }
         }
@@ -47,18 +61,40 @@ fn furnace_dense_and_hierarchical() {
 fn occluder_shadow_comes_from_antiradiance() {
     let scene = scenes::occluder_scene();
     let patches: Patches = build_patches(&scene, None);
-    let truth = solve_reference(&patches, &ReferenceOptions { spp: 1024, ..ReferenceOptions::default() }, &hidden());
+    let truth = solve_reference(
+        &patches,
+        &ReferenceOptions {
+            spp: 1024,
+            ..ReferenceOptions::default()
+        },
+        &hidden(),
+    );
     let with = solve_dense(&patches, &SolverOptions::default(), &hidden());
     let without = solve_dense(
         &patches,
-        &SolverOptions { antiradiance: false, ..SolverOptions::default() },
+        &SolverOptions {
+            antiradiance: false,
+            ..SolverOptions::default()
+        },
         &hidden(),
     );
     let hier = solve_hierarchical(&patches, &SolverOptions::default(), &hidden());
-    let (e_with, e_without, e_hier) = (error(&scene, &with, &truth), error(&scene, &without, &truth), error(&scene, &hier, &truth));
-    eprintln!("occluder: antiradiance {e_with:.4}, without {e_without:.4}, hierarchical {e_hier:.4}");
-    assert!(e_without > 0.1, "the plate really shadows the floor: {e_without}");
-    assert!(e_with < 0.25 * e_without, "antiradiance {e_with} vs none {e_without}");
+    let (e_with, e_without, e_hier) = (
+        error(&scene, &with, &truth),
+        error(&scene, &without, &truth),
+        error(&scene, &hier, &truth),
+    );
+    eprintln!(
+        "occluder: antiradiance {e_with:.4}, without {e_without:.4}, hierarchical {e_hier:.4}"
+    );
+    assert!(
+        e_without > 0.1,
+        "the plate really shadows the floor: {e_without}"
+    );
+    assert!(
+        e_with < 0.25 * e_without,
+        "antiradiance {e_with} vs none {e_without}"
+    );
     assert!(e_with < 0.08 && e_hier < 0.08, "{e_with} {e_hier}");
 }
 
@@ -66,7 +102,14 @@ fn occluder_shadow_comes_from_antiradiance() {
 fn cornell_box_colour_bleeding_matches_reference() {
     let scene = scenes::cornell_box();
     let patches = build_patches(&scene, None);
-    let truth = solve_reference(&patches, &ReferenceOptions { spp: 512, ..ReferenceOptions::default() }, &hidden());
+    let truth = solve_reference(
+        &patches,
+        &ReferenceOptions {
+            spp: 512,
+            ..ReferenceOptions::default()
+        },
+        &hidden(),
+    );
     let hier = solve_hierarchical(&patches, &SolverOptions::default(), &hidden());
     let err = error(&scene, &hier, &truth);
     eprintln!("cornell: hierarchical vs reference {err:.4}");
@@ -93,11 +136,23 @@ fn scaling_and_translation_change_nothing() {
     let base = scenes::occluder_scene();
     let options = SolverOptions::default();
     let reference = solve_hierarchical(&build_patches(&base, None), &options, &hidden());
-    for (scale, offset) in [(1e-3, DVec3::ZERO), (1e3, DVec3::ZERO), (1e-4, DVec3::ZERO), (1e4, DVec3::ZERO), (1.0, DVec3::splat(1e5))] {
+    for (scale, offset) in [
+        (1e-3, DVec3::ZERO),
+        (1e3, DVec3::ZERO),
+        (1e-4, DVec3::ZERO),
+        (1e4, DVec3::ZERO),
+        (1.0, DVec3::splat(1e5)),
+    ] {
         let scene = base.transformed(scale, offset);
         for (name, solution) in [
-            ("hierarchical", solve_hierarchical(&build_patches(&scene, None), &options, &hidden())),
-            ("dense", solve_dense(&build_patches(&scene, None), &options, &hidden())),
+            (
+                "hierarchical",
+                solve_hierarchical(&build_patches(&scene, None), &options, &hidden()),
+            ),
+            (
+                "dense",
+                solve_dense(&build_patches(&scene, None), &options, &hidden()),
+            ),
         ] {
             let dense_base = if name == "dense" {
                 solve_dense(&build_patches(&base, None), &options, &hidden())
@@ -118,7 +173,10 @@ fn emission_extremes_stay_finite() {
         let solution = solve_hierarchical(&patches, &SolverOptions::default(), &hidden());
         for b in &solution.triangle_radiance {
             for &x in b {
-                assert!(x.is_finite() && (x / (2.0 * emission) - 1.0).abs() < 0.005, "{emission}: {x}");
+                assert!(
+                    x.is_finite() && (x / (2.0 * emission) - 1.0).abs() < 0.005,
+                    "{emission}: {x}"
+                );
             }
         }
     }

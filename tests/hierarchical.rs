@@ -10,8 +10,17 @@ use antiradiance::solution::{relative_error, Solution};
 use antiradiance::solve::SolverOptions;
 
 fn error(patches: &Patches, estimate: &Solution, truth: &Solution) -> f64 {
-    let emissive: Vec<bool> = patches.emission.iter().map(|e| e.iter().any(|&x| x > 0.0)).collect();
-    relative_error(&patches.area, &emissive, &estimate.patch_radiance, &truth.patch_radiance)
+    let emissive: Vec<bool> = patches
+        .emission
+        .iter()
+        .map(|e| e.iter().any(|&x| x > 0.0))
+        .collect();
+    relative_error(
+        &patches.area,
+        &emissive,
+        &estimate.patch_radiance,
+        &truth.patch_radiance,
+    )
 }
 
 #[test]
@@ -30,9 +39,13 @@ fn every_element_pair_is_covered_exactly_once() {
                 };
                 let prepared = Prepared::new(&patches, &options, true);
                 prepared.tree.validate().unwrap();
-                assert!(prepared.element_count() <= 3000, "{name}: keep this test small");
-                links::validate(&prepared.tree, &prepared.links)
-                    .unwrap_or_else(|e| panic!("{name} epsilon {epsilon} two_sided {two_sided}: {e}"));
+                assert!(
+                    prepared.element_count() <= 3000,
+                    "{name}: keep this test small"
+                );
+                links::validate(&prepared.tree, &prepared.links).unwrap_or_else(|e| {
+                    panic!("{name} epsilon {epsilon} two_sided {two_sided}: {e}")
+                });
             }
         }
     }
@@ -57,7 +70,12 @@ fn refined_to_element_pairs_equals_dense() {
             let dense = solve_dense(&patches, &options, &Progress::hidden());
             let hier = solve_hierarchical(&patches, &options, &Progress::hidden());
             assert_eq!(dense.stats.iterations, hier.stats.iterations);
-            for (p, (a, b)) in dense.patch_radiance.iter().zip(&hier.patch_radiance).enumerate() {
+            for (p, (a, b)) in dense
+                .patch_radiance
+                .iter()
+                .zip(&hier.patch_radiance)
+                .enumerate()
+            {
                 for c in 0..3 {
                     let scale = a[c].abs().max(1e-6);
                     assert!(
@@ -83,7 +101,11 @@ fn default_settings_agree_with_dense() {
         let dense = solve_dense(&patches, &options, &Progress::hidden());
         let mut errors = Vec::new();
         for (split_depth, epsilon) in [(0, 0.25), (0, 0.5), (4, 0.25)] {
-            let options = SolverOptions { split_depth, epsilon, ..options.clone() };
+            let options = SolverOptions {
+                split_depth,
+                epsilon,
+                ..options.clone()
+            };
             let hier = solve_hierarchical(&patches, &options, &Progress::hidden());
             let err = error(&patches, &hier, &dense);
             eprintln!(
@@ -98,7 +120,10 @@ fn default_settings_agree_with_dense() {
         // elsewhere).
         for (split_depth, epsilon, err) in errors {
             if split_depth == 0 && epsilon <= 0.25 {
-                assert!(err < 0.02, "{name} epsilon {epsilon}: hierarchical vs dense error {err}");
+                assert!(
+                    err < 0.02,
+                    "{name} epsilon {epsilon}: hierarchical vs dense error {err}"
+                );
             }
         }
     }
