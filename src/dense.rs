@@ -13,7 +13,7 @@ use crate::mesh::Patches;
 use crate::progress::Progress;
 use crate::solution::{Solution, SolveStats};
 use crate::solve::{finish, relative_change, Convergence, SolverOptions};
-use crate::transport::{couple, is_near, Coupling, Entry, PatchGeom};
+use crate::transport::{couple, gather_entries, is_near, Coupling, Entry, PatchGeom};
 
 /// Solves the scene with the dense solver. Preconditions: `options.validate()` passed.
 ///
@@ -86,24 +86,15 @@ pub fn solve_dense(patches: &Patches, options: &SolverOptions, progress: &Progre
                 let mut links = 0u64;
                 let mut gather = |s: usize, entries: &[Entry]| {
                     links += 1;
-                    let b_s = radiance[s];
-                    for e in entries {
-                        let a_s = anti[s * nb + e.bin as usize];
-                        row += if params.two_sided {
-                            e.f_a
-                        } else {
-                            e.f_a + e.f_b
-                        } as f64;
-                        for c in 0..3 {
-                            let a = if options.antiradiance {
-                                a_s[c] as f64
-                            } else {
-                                0.0
-                            };
-                            h[c] += e.f_b as f64 * b_s[c] - e.f_a as f64 * a;
-                            a_acc[e.bin as usize][c] += e.o_b as f64 * b_s[c] - e.o_a as f64 * a;
-                        }
-                    }
+                    row += gather_entries(
+                        entries,
+                        radiance[s],
+                        &anti[s * nb..(s + 1) * nb],
+                        options.antiradiance,
+                        params.two_sided,
+                        &mut h,
+                        &mut a_acc,
+                    );
                 };
                 for (s, entries) in &near[r] {
                     gather(*s as usize, entries);

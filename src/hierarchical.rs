@@ -22,6 +22,7 @@ use crate::mesh::Patches;
 use crate::progress::Progress;
 use crate::solution::{Solution, SolveStats};
 use crate::solve::{finish, Convergence, SolverOptions};
+use crate::transport::gather_entries;
 
 /// Time spent in each stage of a hierarchical solve, seconds.
 #[derive(Clone, Debug, Default, serde::Serialize)]
@@ -222,20 +223,18 @@ impl Prepared {
                     let mut row = 0.0;
                     for l in links.exact_start[e]..links.exact_start[e + 1] {
                         let s = links.exact_sender[l as usize] as usize;
-                        let b_s = radiance[s];
                         let entries = &links.exact_entries[links.exact_entry_start[l as usize]
                             as usize
                             ..links.exact_entry_start[l as usize + 1] as usize];
-                        for en in entries {
-                            row += if two_sided { en.f_a } else { en.f_a + en.f_b } as f64;
-                            let a_s = anti[s * nb + en.bin as usize];
-                            for c in 0..3 {
-                                let a = if use_anti { a_s[c] as f64 } else { 0.0 };
-                                h[c] += en.f_b as f64 * b_s[c] - en.f_a as f64 * a;
-                                a_acc[en.bin as usize][c] +=
-                                    en.o_b as f64 * b_s[c] - en.o_a as f64 * a;
-                            }
-                        }
+                        row += gather_entries(
+                            entries,
+                            radiance[s],
+                            &anti[s * nb..(s + 1) * nb],
+                            use_anti,
+                            two_sided,
+                            &mut h,
+                            &mut a_acc,
+                        );
                     }
                     let n_e = elem_normal[e];
                     let x_e = elem_center[e];
