@@ -56,9 +56,36 @@ pub struct Prepared {
     pub timings: HierarchyTimings,
 }
 
-/// A previous element state to start from: (radiance per element, antiradiance per element and
-/// bin).
-pub type WarmStart<'a> = (&'a [[f64; 3]], &'a [[f32; 3]]);
+/// The solver's state over the elements after a solve: radiance per element and antiradiance per
+/// element and bin. Pass it back to [`Prepared::solve_with_source`] to warm-start the next solve
+/// of the same [`Prepared`] scene (interactive relighting).
+#[derive(Clone, Debug, Default)]
+pub struct ElementState {
+    /// Outgoing radiance per element, RGB (normalized units).
+    radiance: Vec<[f64; 3]>,
+    /// Antiradiance per element and bin, RGB.
+    anti: Vec<[f32; 3]>,
+}
+
+impl ElementState {
+    /// Outgoing radiance per element (normalized units, element order of [`Prepared`]).
+    pub fn radiance(&self) -> &[[f64; 3]] {
+        &self.radiance
+    }
+}
+
+/// One element (leaf triangle after on-demand subdivision) of a prepared scene, unit frame.
+#[derive(Clone, Copy, Debug)]
+pub struct Element {
+    /// Corners, unit frame.
+    pub corners: crate::geometry::Tri,
+    /// Unit normal (front side).
+    pub normal: DVec3,
+    /// Area, unit frame.
+    pub area: f64,
+    /// The input patch (triangle) it is part of.
+    pub patch: u32,
+}
 
 /// The link parameters implied by solver options.
 pub fn link_params(options: &SolverOptions) -> LinkParams {
@@ -130,39 +157,79 @@ impl Prepared {
             + self.links.cluster.len() as u64 * 24
     }
 
+    /// The elements, in the order of [`ElementState`] and of `elem_source` in
+    /// [`Prepared::solve_with_source`].
+    pub fn elements(&self) -> impl ExactSizeIterator<Item = Element> + '_ {
+        self.tree.elements.iter().enumerate().map(|(e, &node)| Element {
+            corners: self.tree.nodes[node as usize].corners,
+            normal: self.elem_normal[e],
+            area: self.elem_area[e],
+            patch: self.elem_patch[e],
+        })
+    }
+
     /// Solves with the patches' own emission.
-    pub fn solve(
-        &mut self,
-        patches: &Patches,
-        progress: &Progress,
-    ) -> (Solution, Vec<[f64; 3]>, Vec<[f32; 3]>) {
+    pub fn solve(&mut self, patches: &Patches, progress: &Progress) -> (Solution, ElementState) {
         self.solve_with_emission(patches, &patches.emission, None, progress)
     }
 
     /// Solves for a given per-patch emission (normalized units, as in `Patches::emission`),
-    /// optionally warm-starting from a previous element state `(radiance, antiradiance)`.
+    /// optionally warm-starting from a previous [`ElementState`] of this scene.
     /// Returns the solution and the final element state for the next warm start.
+    ///
+    /// # Panics
+    /// When `patch_emission.len() != patches.len()`.
     pub fn solve_with_emission(
         &mut self,
         patches: &Patches,
         patch_emission: &[[f64; 3]],
-        warm: Option<WarmStart<'_>>,
+        warm: Option<&ElementState>,
         progress: &Progress,
-    ) -> (Solution, Vec<[f64; 3]>, Vec<[f32; 3]>) {
-        let t0 = Instant::now();
-        let options = &self.options;
-        let nb = self.bins.len();
-        let n = self.element_count();
-        let two_sided = options.two_sided;
-        let use_anti = options.antiradiance;
-        let emission: Vec<[f64; 3]> = self
+    ) -> (Solution, ElementState) {
+        assert_eq!(patch_emission.len(), patches.len());
+        let source: Vec<[f64; 3]> = self
             .elem_patch
             .iter()
             .map(|&p| patch_emission[p as usize])
             .collect();
+        let (mut solution, state) = self.solve_with_source(patches, &source, warm, progress);
+        // Patches the tree does not hold (inactive) keep their emission.
+        for p in 0..patches.len() {
+            if !patches.active[p] {
+                solution.patch_radiance[p] = patch_emission[p];
+            }
+        }
+        (solution, state)
+    }
+
+    /// Solves `B_e = source_e + rho_e H_e(B)` for a per-element source radiance (normalized
+    /// units, element order of [`Prepared::elements`]). With the emission as the source this is
+    /// the usual solve; with the reflected direct light as the source it gives the indirect
+    /// part on top of exact direct lighting. Warm-starts from `warm` when it belongs to this
+    /// scene (same element and bin count), else starts from the source.
+    ///
+    /// # Panics
+    /// When `elem_source.len() != self.element_count()`.
+    pub fn solve_with_source(
+        &mut self,
+        patches: &Patches,
+        elem_source: &[[f64; 3]],
+        warm: Option<&ElementState>,
+        progress: &Progress,
+    ) -> (Solution, ElementState) {
+        let t0 = Instant::now();
+        let options = &self.options;
+        let nb = self.bins.len();
+        let n = self.element_count();
+        assert_eq!(elem_source.len(), n);
+        let two_sided = options.two_sided;
+        let use_anti = options.antiradiance;
+        let emission = elem_source;
         let (mut radiance, mut anti) = match warm {
-            Some((b, a)) if b.len() == n && a.len() == n * nb => (b.to_vec(), a.to_vec()),
-            _ => (emission.clone(), vec![[0.0f32; 3]; n * nb]),
+            Some(w) if w.radiance.len() == n && w.anti.len() == n * nb => {
+                (w.radiance.clone(), w.anti.clone())
+            }
+            _ => (emission.to_vec(), vec![[0.0f32; 3]; n * nb]),
         };
         let mut next_radiance = radiance.clone();
         let mut next_anti = anti.clone();
@@ -304,7 +371,8 @@ impl Prepared {
         }
         stats.residual = convergence.residual;
 
-        // Elements -> patches (area-weighted mean), inactive patches keep their emission.
+        // Elements -> patches (area-weighted mean); patches without elements (inactive) get 0
+        // here and their emission from `solve_with_emission`.
         let mut patch_sum = vec![[0.0f64; 3]; patches.len()];
         let mut patch_area = vec![0.0f64; patches.len()];
         for e in 0..n {
@@ -319,13 +387,13 @@ impl Prepared {
                 if patch_area[p] > 0.0 {
                     patch_sum[p].map(|x| x / patch_area[p])
                 } else {
-                    patch_emission[p]
+                    [0.0; 3]
                 }
             })
             .collect();
         self.timings.iterate = t0.elapsed().as_secs_f64();
         let solution = finish(patches, patch_radiance, stats, options.clamp_negative);
-        (solution, radiance, anti)
+        (solution, ElementState { radiance, anti })
     }
 }
 
