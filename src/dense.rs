@@ -133,9 +133,7 @@ pub fn solve_dense(patches: &Patches, options: &SolverOptions, progress: &Progre
         stats.iterations = iteration;
         progress.inc(1);
         progress.message(format!("residual {change:.2e}"));
-        // The first sweeps only propagate emission; do not stop before light has bounced once
-        // and antiradiance has had a sweep to cancel it.
-        if convergence.update(change, options.tol) && iteration >= 3 {
+        if convergence.sweep_done(iteration, change, options.tol) {
             stats.converged = true;
             break;
         }

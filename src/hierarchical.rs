@@ -17,7 +17,7 @@ use rayon::prelude::*;
 
 use crate::bins::Bins;
 use crate::hierarchy::{ClusterTree, NONE};
-use crate::links::{self, LinkParams, Links};
+use crate::links::{self, ClusterLink, LinkParams, Links};
 use crate::mesh::Patches;
 use crate::progress::Progress;
 use crate::solution::{Solution, SolveStats};
@@ -50,6 +50,8 @@ pub struct Prepared {
     elem_center: Vec<DVec3>,
     elem_albedo: Vec<[f64; 3]>,
     elem_patch: Vec<u32>,
+    /// Normal groups of the large nodes, for the pull.
+    groups: SenderGroups,
     /// Solver options the links were refined for.
     pub options: SolverOptions,
     /// Build timings.
@@ -118,6 +120,7 @@ impl Prepared {
             elem_center: Vec::with_capacity(tree.elements.len()),
             elem_albedo: Vec::with_capacity(tree.elements.len()),
             elem_patch: Vec::with_capacity(tree.elements.len()),
+            groups: SenderGroups::default(),
             tree,
             links,
             bins,
@@ -138,6 +141,7 @@ impl Prepared {
             prepared.elem_albedo.push(patches.albedo[n.patch as usize]);
             prepared.elem_patch.push(n.patch);
         }
+        prepared.groups = SenderGroups::build(&prepared.tree, &prepared.elem_area, &prepared.elem_normal);
         prepared
     }
 
@@ -155,6 +159,7 @@ impl Prepared {
             + n * (8 + 24 + 24 + 4)
             + 2 * n * (24 + nb * 12)
             + self.links.cluster.len() as u64 * 24
+            + self.groups.bytes(nb)
     }
 
     /// The elements, in the order of [`ElementState`] and of `elem_source` in
@@ -249,37 +254,36 @@ impl Prepared {
             &self.elem_albedo,
             &self.elem_center,
         );
+
         let inv_pi = 1.0 / std::f64::consts::PI;
+        let groups = &self.groups;
+        let mut group_b = vec![[0.0f64; 3]; groups.normal.len()];
+        let mut group_a = vec![[0.0f64; 3]; groups.normal.len() * nb];
+        let ctx = SweepContext {
+            tree,
+            bins,
+            elem_area,
+            elem_normal,
+            use_anti,
+            two_sided,
+        };
 
         for iteration in 1..=options.max_iterations {
-            // 1. Pull: sender intensity along every cluster link.
+            // 1. Sender summaries: per normal group of every large node, the area-weighted sums of
+            //    B and of each antiradiance bin (bottom-up, children before parents).
+            groups.accumulate(&radiance, &anti, elem_area, nb, &mut group_b, &mut group_a);
+
+            // 2. Pull: the radiant intensity every cluster link's sender sends along the link.
             intensity
                 .par_iter_mut()
                 .zip(links.cluster.par_iter())
                 .for_each(|(out, l)| {
-                    let w = DVec3::new(l.w[0] as f64, l.w[1] as f64, l.w[2] as f64);
-                    let (e0, e1) = tree.nodes[l.sender as usize].elements;
-                    let mut acc = [0.0f64; 3];
-                    for e in e0 as usize..e1 as usize {
-                        let cos = elem_normal[e].dot(w);
-                        let a = elem_area[e];
-                        if cos > 0.0 {
-                            for c in 0..3 {
-                                acc[c] += a * cos * radiance[e][c];
-                            }
-                        }
-                        if use_anti && (two_sided || cos < 0.0) {
-                            let anti_e = anti[e * nb + l.bin as usize];
-                            let k = a * cos.abs();
-                            for c in 0..3 {
-                                acc[c] -= k * anti_e[c] as f64;
-                            }
-                        }
-                    }
-                    *out = acc;
+                    *out = ctx.pull(l, groups, &group_b, &group_a, &radiance, &anti);
                 });
 
-            // 2-3. Gather per element: exact links, then cluster links into it and its ancestors.
+            // 3. Gather per element: exact links, then the cluster links into it and its ancestors,
+            //    each with the element's own direction and distance from the link's sender (the
+            //    antiradiance goes to the link's bin, the one its sender reads when it passes it on).
             let change_parts: Vec<(f64, f64, f64)> = next_radiance
                 .par_iter_mut()
                 .zip(next_anti.par_chunks_mut(nb))
@@ -331,7 +335,7 @@ impl Prepared {
                                 }
                             }
                             if use_anti && (cos > 0.0 || two_sided) {
-                                let bin = bins.bin_of(w);
+                                let bin = l.bin as usize;
                                 let k = g / bins.solid_angle[bin];
                                 for c in 0..3 {
                                     a_acc[bin][c] += k * i[c];
@@ -352,19 +356,24 @@ impl Prepared {
                     (num, den, row)
                 })
                 .collect();
-            let (num, den) = change_parts
-                .iter()
-                .fold((0.0, 0.0), |acc, p| (acc.0 + p.0, acc.1 + p.1));
+
+            let sums = change_parts.iter().fold(SweepSums::default(), |acc, p| {
+                acc.add(SweepSums {
+                    num: p.0,
+                    den: p.1,
+                    max_row: p.2,
+                })
+            });
             if iteration == 1 {
-                stats.max_row_sum = change_parts.iter().map(|p| p.2).fold(0.0, f64::max);
+                stats.max_row_sum = sums.max_row;
             }
-            let change = if den > 0.0 { num / den } else { 0.0 };
+            let change = if sums.den > 0.0 { sums.num / sums.den } else { 0.0 };
             std::mem::swap(&mut radiance, &mut next_radiance);
             std::mem::swap(&mut anti, &mut next_anti);
             stats.iterations = iteration;
             progress.inc(1);
             progress.message(format!("residual {change:.2e}"));
-            if convergence.update(change, options.tol) && iteration >= 3 {
+            if convergence.sweep_done(iteration, change, options.tol) {
                 stats.converged = true;
                 break;
             }
@@ -405,4 +414,305 @@ pub fn solve_hierarchical(
 ) -> Solution {
     let mut prepared = Prepared::new(patches, options, false);
     prepared.solve(patches, progress).0
+}
+
+/// Nodes with at most this many elements pull per element; larger ones pull per normal group.
+const PULL_PER_ELEMENT_MAX: u32 = 8;
+
+/// Most distinct exact normals a node's groups keep; beyond it normals are grouped by cell of a
+/// coarse direction grid (`GROUP_CELLS` x `GROUP_CELLS` octahedral cells, about 45 degrees wide).
+const MAX_EXACT_GROUPS: usize = 8;
+const GROUP_CELLS: usize = 4;
+
+/// Two unit normals closer than this (1 - cos) are the same group.
+const SAME_NORMAL: f64 = 1e-9;
+
+/// Normal groups of the large nodes (more than [`PULL_PER_ELEMENT_MAX`] elements).
+///
+/// A cluster link's sender sends `sum_e a_e (B_e max(0, n_e . w) - A_e[bin] max(0, -n_e . w))`;
+/// for elements sharing a normal that is `max(0, n . w) sum a_e B_e - ...`, so a node needs only
+/// per-group sums. Flat (architectural) scenes have few exact normals per node and the pull is
+/// exact; curved ones are grouped by normal cell with the group's area-weighted mean normal.
+#[derive(Clone, Debug, Default)]
+struct SenderGroups {
+    /// Per node, its groups `range.0..range.1` (empty for small nodes).
+    range: Vec<(u32, u32)>,
+    /// Per group, the area-weighted mean normal (unit for exact groups, shorter for cells).
+    normal: Vec<DVec3>,
+    /// Per group, its area.
+    area: Vec<f64>,
+    /// Per group, the group of the parent node it adds into ([`NONE`] at the root).
+    parent_group: Vec<u32>,
+    /// Per element, the group of its lowest large ancestor it adds into ([`NONE`] if none).
+    elem_group: Vec<u32>,
+    /// Large nodes, children before parents.
+    order: Vec<u32>,
+}
+
+/// What feeds a group: a child's group or an element of a small child.
+enum GroupInput {
+    Group(u32),
+    Element(u32),
+}
+
+impl SenderGroups {
+    /// Builds the groups of every large node of a finalized tree.
+    fn build(tree: &ClusterTree, elem_area: &[f64], elem_normal: &[DVec3]) -> SenderGroups {
+        let mut groups = SenderGroups {
+            range: vec![(0, 0); tree.nodes.len()],
+            elem_group: vec![NONE; elem_area.len()],
+            ..SenderGroups::default()
+        };
+        if tree.nodes.is_empty() {
+            return groups;
+        }
+        let maxe: u32 = std::env::var("AR_PULLMAX").ok().and_then(|s| s.parse().ok()).unwrap_or(PULL_PER_ELEMENT_MAX);
+        let large = |i: u32| {
+            let (e0, e1) = tree.nodes[i as usize].elements;
+            e1 - e0 > maxe
+        };
+        // Post-order over the large nodes.
+        let mut stack = vec![(0u32, false)];
+        while let Some((i, done)) = stack.pop() {
+            if !large(i) {
+                continue;
+            }
+            if done {
+                groups.order.push(i);
+            } else {
+                stack.push((i, true));
+                let node = &tree.nodes[i as usize];
+                for c in node.first_child..node.first_child + node.child_count as u32 {
+                    stack.push((c, false));
+                }
+            }
+        }
+        let cells = Bins::new(GROUP_CELLS);
+        let order = std::mem::take(&mut groups.order);
+        for &i in &order {
+            // Inputs: the groups of large children, the elements of small ones.
+            let node = &tree.nodes[i as usize];
+            let mut inputs: Vec<(GroupInput, DVec3, f64)> = Vec::new();
+            for c in node.first_child..node.first_child + node.child_count as u32 {
+                if large(c) {
+                    let (g0, g1) = groups.range[c as usize];
+                    for g in g0..g1 {
+                        let (n, a) = (groups.normal[g as usize], groups.area[g as usize]);
+                        inputs.push((GroupInput::Group(g), n, a));
+                    }
+                } else {
+                    let (e0, e1) = tree.nodes[c as usize].elements;
+                    for e in e0..e1 {
+                        let (n, a) = (elem_normal[e as usize], elem_area[e as usize]);
+                        inputs.push((GroupInput::Element(e), n, a));
+                    }
+                }
+            }
+            // Exact groups when every input has a unit normal and there are few distinct ones;
+            // else cells of a coarse direction grid.
+            let mut distinct: Vec<DVec3> = Vec::new();
+            let mut key_of: Vec<usize> = Vec::with_capacity(inputs.len());
+            let mut exact = true;
+            for (_, n, _) in &inputs {
+                if (n.length_squared() - 1.0).abs() > 1e-9 {
+                    exact = false;
+                    break;
+                }
+                match distinct.iter().position(|d| 1.0 - d.dot(*n) <= SAME_NORMAL) {
+                    Some(k) => key_of.push(k),
+                    None if distinct.len() < MAX_EXACT_GROUPS => {
+                        key_of.push(distinct.len());
+                        distinct.push(*n);
+                    }
+                    None => {
+                        exact = false;
+                        break;
+                    }
+                }
+            }
+            let count = if exact {
+                distinct.len()
+            } else {
+                key_of.clear();
+                let mut cell_keys: Vec<usize> = Vec::new();
+                for (_, n, _) in &inputs {
+                    let cell = cells.bin_of(*n);
+                    let k = cell_keys.iter().position(|&c| c == cell).unwrap_or_else(|| {
+                        cell_keys.push(cell);
+                        cell_keys.len() - 1
+                    });
+                    key_of.push(k);
+                }
+                cell_keys.len()
+            };
+            let first = groups.normal.len() as u32;
+            groups.range[i as usize] = (first, first + count as u32);
+            groups.normal.extend(std::iter::repeat_n(DVec3::ZERO, count));
+            groups.area.extend(std::iter::repeat_n(0.0, count));
+            groups.parent_group.extend(std::iter::repeat_n(NONE, count));
+            // Wire the inputs; group normals are area-weighted means.
+            for ((input, n, a), &k) in inputs.iter().zip(&key_of) {
+                let g = first + k as u32;
+                match input {
+                    GroupInput::Group(child) => groups.parent_group[*child as usize] = g,
+                    GroupInput::Element(e) => groups.elem_group[*e as usize] = g,
+                }
+                groups.normal[g as usize] += *a * *n;
+                groups.area[g as usize] += *a;
+            }
+            for g in first as usize..first as usize + count {
+                if exact {
+                    groups.normal[g] = groups.normal[g].normalize_or_zero();
+                } else if groups.area[g] > 0.0 {
+                    groups.normal[g] /= groups.area[g];
+                }
+            }
+        }
+        groups.order = order;
+        groups
+    }
+
+    /// True when node `i` pulls per group.
+    fn is_grouped(&self, i: u32) -> bool {
+        let (g0, g1) = self.range[i as usize];
+        g1 > g0
+    }
+
+    /// Bytes of the per-sweep group sums.
+    fn bytes(&self, bins: u64) -> u64 {
+        self.normal.len() as u64 * (24 + 8 + 4 + 24 * (1 + bins))
+    }
+
+    /// Area-weighted sums of B (`group_b`) and of every antiradiance bin (`group_a`) per group:
+    /// elements into their lowest large ancestor's groups, then groups into their parents'.
+    fn accumulate(
+        &self,
+        radiance: &[[f64; 3]],
+        anti: &[[f32; 3]],
+        elem_area: &[f64],
+        nb: usize,
+        group_b: &mut [[f64; 3]],
+        group_a: &mut [[f64; 3]],
+    ) {
+        group_b.fill([0.0; 3]);
+        group_a.fill([0.0; 3]);
+        for (e, &g) in self.elem_group.iter().enumerate() {
+            if g == NONE {
+                continue;
+            }
+            let (g, a) = (g as usize, elem_area[e]);
+            for c in 0..3 {
+                group_b[g][c] += a * radiance[e][c];
+            }
+            let dst = &mut group_a[g * nb..(g + 1) * nb];
+            for (d, s) in dst.iter_mut().zip(&anti[e * nb..(e + 1) * nb]) {
+                for c in 0..3 {
+                    d[c] += a * s[c] as f64;
+                }
+            }
+        }
+        for &i in &self.order {
+            let (g0, g1) = self.range[i as usize];
+            for g in g0 as usize..g1 as usize {
+                let p = self.parent_group[g];
+                if p == NONE {
+                    continue;
+                }
+                let p = p as usize;
+                for c in 0..3 {
+                    group_b[p][c] += group_b[g][c];
+                }
+                let (src, dst) = if p < g {
+                    let (lo, hi) = group_a.split_at_mut(g * nb);
+                    (&hi[..nb], &mut lo[p * nb..(p + 1) * nb])
+                } else {
+                    let (lo, hi) = group_a.split_at_mut(p * nb);
+                    (&lo[g * nb..(g + 1) * nb], &mut hi[..nb])
+                };
+                for (d, s) in dst.iter_mut().zip(src) {
+                    for c in 0..3 {
+                        d[c] += s[c];
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Sums over a sweep's elements: relative change numerator and denominator, largest row sum.
+#[derive(Clone, Copy, Debug, Default)]
+struct SweepSums {
+    num: f64,
+    den: f64,
+    max_row: f64,
+}
+
+impl SweepSums {
+    fn add(self, o: SweepSums) -> SweepSums {
+        SweepSums {
+            num: self.num + o.num,
+            den: self.den + o.den,
+            max_row: self.max_row.max(o.max_row),
+        }
+    }
+}
+
+/// Everything a sweep reads that does not change between sweeps.
+struct SweepContext<'a> {
+    tree: &'a ClusterTree,
+    bins: &'a Bins,
+    elem_area: &'a [f64],
+    elem_normal: &'a [DVec3],
+    use_anti: bool,
+    two_sided: bool,
+}
+
+impl SweepContext<'_> {
+    /// The radiant intensity a cluster link's sender sends along the link: B through the front of
+    /// every element, minus antiradiance through the back (both sides when two-sided).
+    fn pull(
+        &self,
+        l: &ClusterLink,
+        groups: &SenderGroups,
+        group_b: &[[f64; 3]],
+        group_a: &[[f64; 3]],
+        radiance: &[[f64; 3]],
+        anti: &[[f32; 3]],
+    ) -> [f64; 3] {
+        let nb = self.bins.len();
+        let w = DVec3::new(l.w[0] as f64, l.w[1] as f64, l.w[2] as f64);
+        let bin = l.bin as usize;
+        let mut acc = [0.0f64; 3];
+        let mut add = |cos: f64, b: [f64; 3], a: [f64; 3]| {
+            if cos > 0.0 {
+                for c in 0..3 {
+                    acc[c] += cos * b[c];
+                }
+            }
+            if self.use_anti && (self.two_sided || cos < 0.0) {
+                let k = cos.abs();
+                for c in 0..3 {
+                    acc[c] -= k * a[c];
+                }
+            }
+        };
+        if groups.is_grouped(l.sender) {
+            let (g0, g1) = groups.range[l.sender as usize];
+            for g in g0 as usize..g1 as usize {
+                add(groups.normal[g].dot(w), group_b[g], group_a[g * nb + bin]);
+            }
+        } else {
+            let (e0, e1) = self.tree.nodes[l.sender as usize].elements;
+            for e in e0 as usize..e1 as usize {
+                let a = self.elem_area[e];
+                let a_e = anti[e * nb + bin];
+                add(
+                    self.elem_normal[e].dot(w),
+                    radiance[e].map(|x| a * x),
+                    [a * a_e[0] as f64, a * a_e[1] as f64, a * a_e[2] as f64],
+                );
+            }
+        }
+        acc
+    }
 }

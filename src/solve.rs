@@ -172,7 +172,18 @@ impl Convergence {
         };
         self.error_estimate < tol
     }
+
+    /// Records the residual of sweep `iteration` (1-based); true when the solve should stop:
+    /// the estimated remaining error is under `tol` and at least [`MIN_SWEEPS`] sweeps ran (the
+    /// first ones only propagate emission: light must bounce once and antiradiance must have had
+    /// a sweep to cancel it).
+    pub fn sweep_done(&mut self, iteration: usize, residual: f64, tol: f64) -> bool {
+        self.update(residual, tol) && iteration >= MIN_SWEEPS
+    }
 }
+
+/// Fewest sweeps before convergence may be declared.
+pub const MIN_SWEEPS: usize = 3;
 
 /// Area-weighted relative L1 change between two radiance vectors.
 pub fn relative_change(patches: &Patches, old: &[[f64; 3]], new: &[[f64; 3]]) -> f64 {
