@@ -377,6 +377,12 @@ impl Prepared {
                 stats.converged = true;
                 break;
             }
+            // Once the sweeps contract at a steady ratio, jump over the geometric tail.
+            if let Some(k) = convergence.extrapolation_factor() {
+                extrapolate(&mut radiance, &next_radiance, k);
+                extrapolate(&mut anti, &next_anti, k);
+                stats.extrapolations += 1;
+            }
         }
         stats.residual = convergence.residual;
 
@@ -714,5 +720,35 @@ impl SweepContext<'_> {
             }
         }
         acc
+    }
+}
+
+/// `x += k (x - x_previous)`, element-wise.
+fn extrapolate<const C: usize, T>(x: &mut [[T; C]], x_previous: &[[T; C]], k: f64)
+where
+    T: Copy + Into<f64> + FromF64 + Send + Sync,
+{
+    x.par_iter_mut().zip(x_previous.par_iter()).for_each(|(a, b)| {
+        for c in 0..C {
+            let (v, p): (f64, f64) = (a[c].into(), b[c].into());
+            a[c] = T::from_f64(v + k * (v - p));
+        }
+    });
+}
+
+/// Conversion back from f64 for [`extrapolate`].
+trait FromF64 {
+    fn from_f64(x: f64) -> Self;
+}
+
+impl FromF64 for f64 {
+    fn from_f64(x: f64) -> Self {
+        x
+    }
+}
+
+impl FromF64 for f32 {
+    fn from_f64(x: f64) -> Self {
+        x as f32
     }
 }

@@ -24,6 +24,9 @@ pub struct SolveStats {
     pub links: u64,
     /// Bytes held by the solver's main arrays at their peak.
     pub solver_bytes: u64,
+    /// Times the hierarchical solver jumped over the geometric tail of its sweeps (see
+    /// [`crate::solve::Convergence::extrapolation_factor`]).
+    pub extrapolations: usize,
 }
 
 /// A solved scene.
