@@ -13,10 +13,13 @@ pub struct SolveStats {
     pub residual: f64,
     /// True when the residual went under the tolerance before the iteration cap.
     pub converged: bool,
-    /// Area-weighted mass of negative radiance before clamping, relative to the positive mass
-    /// (sum a_t max(0, -B_t) / sum a_t max(0, B_t), mean over RGB).
+    /// Area-weighted mass of negative radiance before clamping, relative to the positive mass:
+    /// sum a_p max(0, -B_p,c) / sum a_p max(0, B_p,c), both sums over patches p and RGB
+    /// channels c (one ratio, not a mean of per-channel ratios).
     pub negative_fraction: f64,
-    /// Number of patches whose radiance was negative in some channel (before clamping).
+    /// Number of patches whose radiance was negative in some channel (before clamping); with no
+    /// `--max-edge` splitting, the number of negative rows of the per-triangle CSV under
+    /// `--keep-negative` (tested in tests/stability.rs).
     pub negative_patches: usize,
     /// Largest receiver form-factor row sum (<= 1 up to discretization; 1 in a closed enclosure).
     pub max_row_sum: f64,
