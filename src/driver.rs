@@ -551,12 +551,60 @@ pub fn run_solver(
     quiet: bool,
 ) -> Solution {
     let progress = Progress::new(kind.name(), options.max_iterations as u64, !quiet);
-    let solution = match kind {
+    let mut solution = match kind {
         SolverKind::Dense => dense::solve_dense(patches, options, &progress),
         SolverKind::Hierarchical => hierarchical::solve_hierarchical(patches, options, &progress),
     };
     progress.finish();
+    // Degenerate and duplicate triangles' patches get the values the model fixes for them,
+    // whatever the solver left there.
+    solution.settle_inactive(patches);
     solution
+}
+
+/// The warning for a solve that stopped at the iteration cap (`None` when it converged): the
+/// solver, the iterations, the last residual against the tolerance and, since the residual
+/// underestimates the remaining error when the iteration contracts slowly, an estimate of that
+/// error and of the iterations still needed, taking the contraction per sweep to be the highest
+/// albedo of the scene (exact for a closed box of one albedo, an upper bound otherwise).
+pub fn cap_warning(
+    solver: &str,
+    stats: &SolveStats,
+    options: &SolverOptions,
+    patches: &Patches,
+) -> Option<String> {
+    if stats.converged {
+        return None;
+    }
+    let rho = (0..patches.len())
+        .filter(|&p| patches.active[p])
+        .flat_map(|p| patches.albedo[p])
+        .fold(0.0f64, f64::max)
+        .min(0.9999);
+    let r = solution::sanitize(stats.residual);
+    let mut text = format!(
+        "the {solver} solver stopped at the iteration cap ({} iterations) without converging: last residual {r:.2e}, tolerance {:.1e}; the result is not the converged solution",
+        stats.iterations, options.tol
+    );
+    if rho > 0.0 && r > 0.0 {
+        let remaining = r * rho / (1.0 - rho);
+        let more = ((options.tol * (1.0 - rho) / (r * rho)).ln() / rho.ln()).ceil();
+        text += &format!(
+            " (its remaining error may be as large as {:.2}% of B: residual x rho/(1 - rho) with the highest albedo rho = {rho})",
+            100.0 * remaining
+        );
+        if more.is_finite() && more > 0.0 {
+            text += &format!(
+                "; raise --max-iterations (to about {} at this rate)",
+                stats.iterations as f64 + more
+            );
+        } else {
+            text += "; raise --max-iterations or --tol";
+        }
+    } else {
+        text += "; raise --max-iterations or --tol";
+    }
+    Some(text)
 }
 
 /// Stage 4 for the path tracer, with a progress bar unless `quiet`.
@@ -640,6 +688,18 @@ impl Report {
         report
     }
 
+    /// Appends warnings of the run (iteration cap, ...) to the scene's in `warnings`.
+    pub fn add_warnings(&mut self, warnings: impl IntoIterator<Item = String>) -> &mut Report {
+        let list = self
+            .fields
+            .entry("warnings")
+            .or_insert_with(|| Value::Array(Vec::new()));
+        if let Value::Array(list) = list {
+            list.extend(warnings.into_iter().map(Value::String));
+        }
+        self
+    }
+
     /// Sets `key` (replacing any previous value); a value that cannot be serialized becomes null.
     pub fn insert(&mut self, key: &str, value: impl Serialize) -> &mut Report {
         let value = serde_json::to_value(value).unwrap_or(Value::Null);
@@ -700,6 +760,15 @@ pub fn solve(args: &SolveArgs) -> Result<()> {
     let solution = timed(&mut timings.solve, || {
         run_solver(args.solver, &loaded.patches, &options, args.quiet)
     });
+    let cap = cap_warning(
+        args.solver.name(),
+        &solution.stats,
+        &options,
+        &loaded.patches,
+    );
+    if let Some(w) = &cap {
+        eprintln!("warning: {w}");
+    }
     timed(&mut timings.output, || {
         write_outputs(&args.output, &loaded, &solution)
     })?;
@@ -709,6 +778,7 @@ pub fn solve(args: &SolveArgs) -> Result<()> {
     if let Some(path) = &args.output.report {
         let mut report = Report::new("solve", &args.scene.scene, &loaded);
         report
+            .add_warnings(cap)
             .insert(
                 "parameters",
                 json!({
@@ -844,11 +914,16 @@ pub fn compare(args: &CompareArgs) -> Result<()> {
     let loaded = load(&args.scene, &mut timings)?;
     let mut overall_peak = None;
     let mut runs = Vec::new();
+    let mut cap_warnings = Vec::new();
     for kind in [SolverKind::Dense, SolverKind::Hierarchical] {
         let (solution, seconds, delta) = measured(&mut overall_peak, || {
             run_solver(kind, &loaded.patches, &options, args.quiet)
         });
         timings.solve += seconds;
+        if let Some(w) = cap_warning(kind.name(), &solution.stats, &options, &loaded.patches) {
+            eprintln!("warning: {w}");
+            cap_warnings.push(w);
+        }
         runs.push((kind, solution, seconds, delta));
     }
     let reference_options = args.reference_spp.map(|spp| ReferenceOptions {
@@ -915,6 +990,7 @@ pub fn compare(args: &CompareArgs) -> Result<()> {
         };
         let mut report = Report::new("compare", &args.scene.scene, &loaded);
         report
+            .add_warnings(cap_warnings)
             .insert(
                 "parameters",
                 json!({

@@ -57,6 +57,9 @@ pub struct Patches {
     pub emission_scale: f64,
     /// First patch of each input triangle; patches of triangle t are `first[t]..first[t + 1]`.
     pub first: Vec<u32>,
+    /// Per input triangle, the earlier triangle it duplicates ([`Scene::duplicates`]): its
+    /// patches are inactive and it takes that triangle's radiance.
+    pub twin: Vec<Option<u32>>,
 }
 
 impl Patches {
@@ -96,10 +99,17 @@ impl Patches {
     }
 
     /// Per-input-triangle values from per-patch values: the area-weighted mean of each triangle's
-    /// patches (a triangle whose patches all have zero area takes its first patch's value).
+    /// patches (a triangle whose patches all have zero area takes its first patch's value; a
+    /// duplicate takes the value of the triangle it repeats, see [`Patches::twin`]).
     pub fn to_input(&self, per_patch: &[[f64; 3]]) -> Vec<[f64; 3]> {
         (0..self.first.len() - 1)
             .map(|t| {
+                let t = self
+                    .twin
+                    .get(t)
+                    .copied()
+                    .flatten()
+                    .map_or(t, |u| u as usize);
                 let range = self.first[t] as usize..self.first[t + 1] as usize;
                 let total: f64 = range.clone().map(|p| self.area[p]).sum();
                 if total > 0.0 {
@@ -125,6 +135,10 @@ impl Patches {
 
 /// Builds the patches of a scene. Each input triangle whose longest edge exceeds `max_edge`
 /// (world units) is split into k*k congruent pieces, k = ceil(longest / max_edge).
+///
+/// A triangle that repeats an earlier one ([`Scene::duplicates`]) gets inactive patches (it
+/// takes no part in transport, so the surface counts once) and is reported with the radiance of
+/// the triangle it repeats.
 ///
 /// Preconditions: the scene has at least one triangle and finite coordinates (as `load_obj`
 /// guarantees); a non-positive or non-finite `max_edge` means no splitting.
@@ -154,6 +168,7 @@ pub fn build_patches(scene: &Scene, max_edge: Option<f64>) -> Patches {
     let mut patches = Patches {
         frame,
         emission_scale,
+        twin: scene.duplicates(),
         ..Patches::default()
     };
     for t in 0..scene.len() {
@@ -161,12 +176,14 @@ pub fn build_patches(scene: &Scene, max_edge: Option<f64>) -> Patches {
         let world = scene.corners(t);
         let unit: Tri = world.map(|p| frame.unit_from_world(p));
         let emission = scene.emission[t].map(|e| e / emission_scale);
-        let active = !scene.is_degenerate(t);
+        let degenerate = scene.is_degenerate(t);
+        let active = !degenerate && patches.twin[t].is_none();
         let k = match max_edge {
-            Some(l) if l > 0.0 && l.is_finite() && active => (geometry::longest_edge(&world) / l)
-                .ceil()
-                .clamp(1.0, 1024.0)
-                as usize,
+            Some(l) if l > 0.0 && l.is_finite() && !degenerate => {
+                (geometry::longest_edge(&world) / l)
+                    .ceil()
+                    .clamp(1.0, 1024.0) as usize
+            }
             _ => 1,
         };
         for piece in geometry::subdivide(&unit, k) {

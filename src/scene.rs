@@ -5,6 +5,7 @@
 //! scene translated far from the origin keeps its precision. Every line-level problem is reported as
 //! `file:line: message` before tobj ever sees the file (tobj 4.0.5 panics on some malformed lines).
 
+use std::collections::{hash_map, HashMap};
 use std::path::{Path, PathBuf};
 
 use glam::DVec3;
@@ -169,6 +170,40 @@ impl Scene {
     pub fn degenerate_count(&self) -> usize {
         (0..self.len()).filter(|&t| self.is_degenerate(t)).count()
     }
+
+    /// For every triangle, the first earlier triangle it duplicates, if any: same three corner
+    /// positions (bit for bit) in the same cyclic order, i.e. the same surface facing the same
+    /// way. Degenerate triangles are never duplicates.
+    ///
+    /// Duplicates must take part in transport only once: two coincident one-sided surfaces
+    /// would reflect the light they receive twice and, in front-only antiradiance, both send
+    /// the antiradiance that cancels the light behind them, which then cancels it twice (a
+    /// doubled plate made the shadow under it negative). Back-to-back copies (reversed corner
+    /// order, a thin two-sided wall) are not duplicates and are solved as they are.
+    pub fn duplicates(&self) -> Vec<Option<u32>> {
+        // `+ 0.0` turns -0.0 into 0.0, so that equal coordinates get equal keys.
+        let key = |p: DVec3| p.to_array().map(|x| (x + 0.0).to_bits());
+        let mut first: HashMap<[[u64; 3]; 3], u32> = HashMap::with_capacity(self.len());
+        (0..self.len())
+            .map(|t| {
+                if self.is_degenerate(t) {
+                    return None;
+                }
+                let k = self.corners(t).map(key);
+                // The rotation that starts at the smallest corner: the same for every cyclic
+                // order of the same corners, different for the reversed order.
+                let start = (0..3).min_by_key(|&i| k[i]).unwrap_or(0);
+                let canonical = [k[start], k[(start + 1) % 3], k[(start + 2) % 3]];
+                match first.entry(canonical) {
+                    hash_map::Entry::Occupied(e) => Some(*e.get()),
+                    hash_map::Entry::Vacant(e) => {
+                        e.insert(t as u32);
+                        None
+                    }
+                }
+            })
+            .collect()
+    }
 }
 
 /// Reads an OBJ file (and the MTL files it names) into a [`Scene`].
@@ -176,8 +211,9 @@ impl Scene {
 /// Errors name the file and, where known, the line: missing or unreadable file, empty or binary
 /// file, malformed numbers, NaN or infinite coordinates, face index out of range, colour lines with
 /// fewer than three numbers, albedo outside [0, 1), negative emission, no non-degenerate triangle.
-/// A missing MTL file, a `usemtl` naming a material no MTL file defines and a scene without
-/// emitters are warnings (in `Scene::warnings`).
+/// A missing MTL file, a `usemtl` naming a material no MTL file defines, triangles that repeat
+/// an earlier one ([`Scene::duplicates`]) and a scene without emitters are warnings (in
+/// `Scene::warnings`).
 ///
 /// Only what the model uses is read: vertex positions (`v x y z`, optionally `w`, vertex colours
 /// ignored), faces (position indices; texture and normal references are ignored), `mtllib`,
@@ -330,6 +366,23 @@ pub fn load_obj(path: &Path, options: &SceneOptions) -> Result<Scene> {
                 scene.len()
             ),
         });
+    }
+    let duplicates = scene.duplicates();
+    if let Some(t) = duplicates.iter().position(Option::is_some) {
+        let count = duplicates.iter().filter(|d| d.is_some()).count();
+        let twin = duplicates[t].unwrap_or(0);
+        let differ = duplicates.iter().enumerate().any(|(t, d)| {
+            d.is_some_and(|u| {
+                scene.albedo[t] != scene.albedo[u as usize]
+                    || scene.emission[t] != scene.emission[u as usize]
+            })
+        });
+        warnings.push(format!(
+            "{}: {} an earlier triangle (same corners, same orientation; first: triangle {t} repeats {twin}); each is solved once and reported with its first copy's radiance{}",
+            path.display(),
+            if count == 1 { "1 triangle repeats".to_string() } else { format!("{count} triangles repeat") },
+            if differ { " (some copies have other materials: the first copy's material is used)" } else { "" }
+        ));
     }
     if scene.emitter_count() == 0 {
         warnings.push(format!(

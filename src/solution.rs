@@ -13,10 +13,13 @@ pub struct SolveStats {
     pub residual: f64,
     /// True when the residual went under the tolerance before the iteration cap.
     pub converged: bool,
-    /// Area-weighted mass of negative radiance before clamping, relative to the positive mass
-    /// (sum a_t max(0, -B_t) / sum a_t max(0, B_t), mean over RGB).
+    /// Area-weighted mass of negative radiance before clamping, relative to the positive mass:
+    /// sum a_p max(0, -B_p,c) / sum a_p max(0, B_p,c), both sums over patches p and RGB
+    /// channels c (one ratio, not a mean of per-channel ratios).
     pub negative_fraction: f64,
-    /// Number of patches whose radiance was negative in some channel (before clamping).
+    /// Number of patches whose radiance was negative in some channel (before clamping); with no
+    /// `--max-edge` splitting, the number of negative rows of the per-triangle CSV under
+    /// `--keep-negative` (tested in tests/stability.rs).
     pub negative_patches: usize,
     /// Largest receiver form-factor row sum (<= 1 up to discretization; 1 in a closed enclosure).
     pub max_row_sum: f64,
@@ -42,6 +45,8 @@ pub struct Solution {
 
 impl Solution {
     /// Builds a solution from per-patch radiance given in the patches' normalized emission units.
+    /// Inactive patches are then settled as [`Solution::settle_inactive`] describes, whatever
+    /// value `normalized` gave them.
     pub fn from_normalized(
         patches: &Patches,
         normalized: &[[f64; 3]],
@@ -51,11 +56,35 @@ impl Solution {
             .iter()
             .map(|b| b.map(|x| sanitize(x * patches.emission_scale)))
             .collect();
-        let triangle_radiance = patches.to_input(&patch_radiance);
-        Solution {
+        let mut solution = Solution {
             patch_radiance,
-            triangle_radiance,
+            triangle_radiance: Vec::new(),
             stats,
+        };
+        solution.settle_inactive(patches);
+        solution
+    }
+
+    /// Gives inactive patches the values the model fixes for them and recomputes the
+    /// per-triangle radiance: a zero-area patch keeps B = E (scene units), a patch of a
+    /// duplicate triangle ([`Patches::twin`]) takes the radiance of the triangle it repeats.
+    /// Idempotent; a solution whose patch count does not match `patches` is left as it is.
+    pub fn settle_inactive(&mut self, patches: &Patches) {
+        if self.patch_radiance.len() != patches.len() {
+            return;
+        }
+        for p in 0..patches.len() {
+            if !patches.active[p] {
+                self.patch_radiance[p] =
+                    patches.emission[p].map(|e| sanitize(e * patches.emission_scale));
+            }
+        }
+        self.triangle_radiance = patches.to_input(&self.patch_radiance);
+        for p in 0..patches.len() {
+            let t = patches.parent[p] as usize;
+            if !patches.active[p] && patches.twin.get(t).is_some_and(Option::is_some) {
+                self.patch_radiance[p] = self.triangle_radiance[t];
+            }
         }
     }
 }

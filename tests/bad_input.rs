@@ -391,7 +391,14 @@ fn emit_above_rule() {
     assert_eq!(scene.emission[2], [0.0; 3]);
     assert_eq!(scene.emission[3], [5.0; 3]);
     assert_eq!(scene.emitter_count(), 2);
-    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    // The last face repeats the first: the only warning (it is solved once).
+    assert_eq!(scene.warnings.len(), 1, "{:?}", scene.warnings);
+    assert!(
+        scene.warnings[0].contains("1 triangle repeats an earlier triangle")
+            && scene.warnings[0].contains("triangle 3 repeats 0"),
+        "{:?}",
+        scene.warnings
+    );
 }
 
 #[test]
@@ -443,7 +450,15 @@ fn materials_comments_tabs_and_line_endings() {
     assert_eq!(scene.albedo[1], [0.5, 0.1, 0.1]);
     assert_eq!(scene.albedo[2], [0.0; 3]);
     assert_eq!(scene.emission[2], [4.0; 3]);
-    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    // The light repeats the first red face (same corners, same orientation): the only warning,
+    // and it says the copies' materials differ.
+    assert_eq!(scene.warnings.len(), 1, "{:?}", scene.warnings);
+    assert!(
+        scene.warnings[0].contains("triangle 2 repeats 0")
+            && scene.warnings[0].contains("other materials"),
+        "{:?}",
+        scene.warnings
+    );
 }
 
 #[test]
