@@ -115,9 +115,9 @@ impl Relighter {
     /// `None` keeps them), cluster tree and links of `scene` for `options`. The emission is the
     /// scene's own until changed.
     ///
-    /// Errors: [`Error::Parameter`] for invalid `options`, a `max_edge` that is not finite and
-    /// > 0 or would make more than [`driver::MAX_PATCHES`] patches, or invalid emission in the
-    /// scene; [`Error::Scene`] for a scene without triangles, with a non-finite vertex or a
+    /// Errors: [`Error::Parameter`] for invalid `options`, a `max_edge` that is not a finite
+    /// positive length or would make more than [`driver::MAX_PATCHES`] patches, or invalid
+    /// emission in the scene; [`Error::Scene`] for a scene without triangles, with a non-finite vertex or a
     /// vertex index out of range.
     pub fn new(scene: &Scene, max_edge: Option<f64>, options: &SolverOptions) -> Result<Relighter> {
         let start = Instant::now();

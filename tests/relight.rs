@@ -102,12 +102,13 @@ fn relit_frames_match_from_scratch_solves_within_one_percent() {
         let err = error_against(&truth_scene, &relit.solution, &truth);
         assert!(err < 0.01, "frame {f}: {:.3}% from scratch", 100.0 * err);
         // Emitters keep their own radiance on top of what they reflect.
-        for (t, e) in emission.iter().enumerate() {
-            for c in 0..3 {
-                assert!(
-                    relit.solution.triangle_radiance[t][c] >= e[c] * (1.0 - 1e-9),
-                    "frame {f} triangle {t}"
-                );
+        for (t, (e, b)) in emission
+            .iter()
+            .zip(&relit.solution.triangle_radiance)
+            .enumerate()
+        {
+            for (e_c, b_c) in e.iter().zip(b) {
+                assert!(*b_c >= e_c * (1.0 - 1e-9), "frame {f} triangle {t}");
             }
         }
     }
@@ -115,8 +116,8 @@ fn relit_frames_match_from_scratch_solves_within_one_percent() {
     let p = relighter.patches();
     for (patch, &t) in p.parent.iter().enumerate() {
         let e = frames[3][t as usize];
-        for c in 0..3 {
-            assert!((p.emission[patch][c] * p.emission_scale - e[c]).abs() <= 1e-12 * e[c]);
+        for (normalized, e_c) in p.emission[patch].iter().zip(e) {
+            assert!((normalized * p.emission_scale - e_c).abs() <= 1e-12 * e_c);
         }
     }
 }
