@@ -2,7 +2,8 @@
 //!
 //! Pipeline, one module per stage: [`scene`] (load OBJ+MTL) -> [`mesh`] (patches in a unit frame)
 //! -> [`transport`] (pair couplings over [`bins`]) -> [`dense`] / hierarchical solvers ->
-//! [`output`]. [`reference`] is an independent path tracer used as ground truth.
+//! [`output`]. [`reference`] is an independent path tracer used as ground truth. [`relight`]
+//! re-solves a prepared scene for new emission (interactive relighting), with an example.
 
 // `!(x > 0.0)` is used on purpose: it is also true for NaN, which must be rejected too.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -20,6 +21,7 @@ pub mod mesh;
 pub mod output;
 pub mod progress;
 pub mod reference;
+pub mod relight;
 pub mod render;
 pub mod scene;
 pub mod scenes;

@@ -24,6 +24,8 @@ enum Command {
     Reference(driver::ReferenceArgs),
     /// Run the dense and hierarchical solvers on one scene and compare them.
     Compare(driver::CompareArgs),
+    /// Animate the lights of a scene: build links once, relight every frame, write PNG frames.
+    Relight(antiradiance::relight::RelightArgs),
 }
 
 fn main() -> ExitCode {
@@ -36,6 +38,7 @@ fn main() -> ExitCode {
         Command::Solve(args) => driver::solve(args),
         Command::Reference(args) => driver::reference(args),
         Command::Compare(args) => driver::compare(args),
+        Command::Relight(args) => antiradiance::relight::relight(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

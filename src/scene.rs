@@ -70,6 +70,14 @@ pub struct Scene {
     pub albedo: Vec<[f64; 3]>,
     /// Per-triangle emitted radiance, RGB, W / (m^2 sr), each >= 0.
     pub emission: Vec<[f64; 3]>,
+    /// Per-triangle material: an index into `material_names`, or `None` when the triangle has
+    /// no material (no `usemtl`, or a `usemtl` naming a material no MTL file defines). As long as
+    /// the triangle list for scenes from [`load_obj`] and [`Scene::from_triangles`]; a scene
+    /// filled in field by field may leave it short (missing entries mean no material).
+    pub material: Vec<Option<u32>>,
+    /// Names of the materials defined by the scene's MTL files (`newmtl`), in the order tobj
+    /// lists them; empty for scenes built in code.
+    pub material_names: Vec<String>,
     /// Non-fatal findings (missing MTL, no emitter, ...), one line each.
     pub warnings: Vec<String>,
 }
@@ -116,6 +124,12 @@ impl Scene {
         !(cross.is_finite() && cross > DEGENERATE_SIN * scale && cross > 0.0)
     }
 
+    /// The name of triangle `t`'s material, `None` when it has none (or `t` is out of range).
+    pub fn material_name(&self, t: usize) -> Option<&str> {
+        let m = self.material.get(t).copied().flatten()?;
+        self.material_names.get(m as usize).map(String::as_str)
+    }
+
     /// True when triangle `t` emits in any channel.
     pub fn is_emitter(&self, t: usize) -> bool {
         self.emission[t].iter().any(|&e| e > 0.0)
@@ -148,6 +162,7 @@ impl Scene {
             scene.triangles.push([base, base + 1, base + 2]);
             scene.albedo.push(albedo[t]);
             scene.emission.push(emission[t]);
+            scene.material.push(None);
         }
         scene
     }
@@ -307,6 +322,7 @@ pub fn load_obj(path: &Path, options: &SceneOptions) -> Result<Scene> {
 
     let mut scene = Scene {
         path: path.to_path_buf(),
+        material_names: materials.iter().map(|m| m.name.clone()).collect(),
         ..Scene::default()
     };
     let default_albedo = [options.default_albedo; 3];
@@ -316,6 +332,10 @@ pub fn load_obj(path: &Path, options: &SceneOptions) -> Result<Scene> {
         for p in mesh.positions.chunks_exact(3) {
             scene.positions.push(DVec3::new(p[0], p[1], p[2]));
         }
+        let material_id = mesh
+            .material_id
+            .filter(|&i| i < materials.len())
+            .map(|i| i as u32);
         let material = mesh.material_id.and_then(|i| materials.get(i));
         let albedo = material
             .and_then(|m| m.diffuse)
@@ -331,6 +351,7 @@ pub fn load_obj(path: &Path, options: &SceneOptions) -> Result<Scene> {
                 .push([base + tri[0], base + tri[1], base + tri[2]]);
             scene.albedo.push(albedo);
             scene.emission.push(emission);
+            scene.material.push(material_id);
         }
     }
     if scene.triangles.len() != obj_scan.triangle_count {

@@ -1,0 +1,808 @@
+//! Interactive relighting: build the hierarchy and links of a scene once, then re-solve it for
+//! new emission as often as needed, each solve warm-started from the previous one.
+//!
+//! Links, form factors and antiradiance couplings depend only on geometry, albedo and solver
+//! options, never on emission (the equations are linear in E). A [`Relighter`] therefore pays
+//! for the tree and the links once ([`Relighter::new`]) and each relight is only the Jacobi
+//! sweeps of [`Prepared::solve_with_emission`], started from the previous answer: after a small
+//! change of the lights most of the old radiance and antiradiance is still right, so fewer
+//! sweeps are needed than from the emission alone.
+//!
+//! Emission is given in the scene's own units (W / (m² sr), RGB), per input triangle
+//! ([`Relighter::set_emission`], [`Relighter::set_triangle_emission`]) or per material name
+//! ([`Relighter::set_material_emission`], for scenes loaded from OBJ+MTL); every solution comes
+//! back in the scene's units too, exactly as from a from-scratch solve of the same emission (up
+//! to the solver's tolerance).
+//!
+//! # Example
+//!
+//! ```
+//! use antiradiance::relight::Relighter;
+//! use antiradiance::scenes;
+//! use antiradiance::solve::SolverOptions;
+//!
+//! # fn main() -> antiradiance::Result<()> {
+//! let scene = scenes::cornell_box();
+//! // Tree and links are built here, once.
+//! let mut relighter = Relighter::new(&scene, None, &SolverOptions::fast())?;
+//!
+//! // The light as modelled, then at half power: a warm-started re-solve.
+//! let full = relighter.solve(&antiradiance::progress::Progress::hidden());
+//! let mut dimmed = scene.emission.clone();
+//! for e in dimmed.iter_mut() {
+//!     *e = e.map(|x| 0.5 * x);
+//! }
+//! let half = relighter.relight(&dimmed)?;
+//! assert!(half.warm_started);
+//!
+//! // Radiance is linear in emission: the floor (triangle 0) gets half the light.
+//! let (b_full, b_half) = (
+//!     full.solution.triangle_radiance[0][0],
+//!     half.solution.triangle_radiance[0][0],
+//! );
+//! assert!((b_half - 0.5 * b_full).abs() < 0.01 * b_full);
+//!
+//! // Bad emission is an error, not a panic, and changes nothing.
+//! assert!(relighter.set_triangle_emission(0, [f64::NAN, 0.0, 0.0]).is_err());
+//! assert!(relighter.set_emission(&dimmed[..3]).is_err());
+//! # Ok(())
+//! # }
+//! ```
+//!
+//! The command `antiradiance relight` ([`relight`]) animates a light this way and writes one
+//! picture per frame with the time each relight took.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use clap::Args;
+use glam::DVec3;
+use serde::Serialize;
+use serde_json::json;
+
+use crate::driver::{self, Report, SceneArgs, SolverArgs, Timings};
+use crate::error::{Error, Result};
+use crate::hierarchical::{ElementState, Prepared};
+use crate::memory;
+use crate::mesh::{self, Patches};
+use crate::progress::Progress;
+use crate::render::{self, CameraOptions, Shading};
+use crate::scene::Scene;
+use crate::solution::{sanitize, Solution};
+use crate::solve::SolverOptions;
+
+/// Largest factor by which the brightest emission may drift from the normalization scale of the
+/// warm state before the state is dropped and the scale reset (keeps the solver's f32
+/// antiradiance far from overflow and underflow).
+pub const RESCALE_FACTOR: f64 = 1e6;
+
+/// One relight: the solution and how it was obtained.
+#[derive(Clone, Debug)]
+pub struct Relit {
+    /// Outgoing radiance per patch and per input triangle, in the scene's units
+    /// (W / (m² sr), RGB), with the solver's statistics (iterations, residual, ...).
+    pub solution: Solution,
+    /// True when the solve started from the previous solution rather than from the emission.
+    pub warm_started: bool,
+    /// Wall-clock seconds of the solve (the sweeps only: tree and links were built before).
+    pub seconds: f64,
+}
+
+/// A scene prepared once (patches, cluster tree, links) and re-solved for new emission.
+///
+/// Holds the current emission per input triangle (scene units) and the solver state of the
+/// last solve, from which the next one starts. See the [module documentation](self).
+pub struct Relighter {
+    /// The solver's patches; `emission` holds the current emission divided by
+    /// `emission_scale` (the normalization of the warm state).
+    patches: Patches,
+    /// Tree and links, built once.
+    prepared: Prepared,
+    /// Current emission per input triangle, scene units.
+    emission: Vec<[f64; 3]>,
+    /// Per input triangle, its material's name index (`None`: no material).
+    material: Vec<Option<u32>>,
+    /// Material names of the scene.
+    material_names: Vec<String>,
+    /// State of the last solve (normalized by `patches.emission_scale`).
+    warm: Option<ElementState>,
+    /// Seconds spent building patches, tree and links.
+    build_seconds: f64,
+}
+
+impl Relighter {
+    /// Builds patches (`max_edge` splits input triangles as in [`mesh::build_patches`];
+    /// `None` keeps them), cluster tree and links of `scene` for `options`. The emission is the
+    /// scene's own until changed.
+    ///
+    /// Errors: [`Error::Parameter`] for invalid `options`, a `max_edge` that is not a finite
+    /// positive length or would make more than [`driver::MAX_PATCHES`] patches, or invalid
+    /// emission in the scene; [`Error::Scene`] for a scene without triangles, with a non-finite vertex or a
+    /// vertex index out of range.
+    pub fn new(scene: &Scene, max_edge: Option<f64>, options: &SolverOptions) -> Result<Relighter> {
+        let start = Instant::now();
+        check_scene(scene)?;
+        if let Some(l) = max_edge {
+            if !(l.is_finite() && l > 0.0) {
+                return Err(Error::Parameter(format!(
+                    "max edge {l} must be finite and > 0"
+                )));
+            }
+        }
+        let count = driver::patch_count(scene, max_edge);
+        if count > driver::MAX_PATCHES && count > scene.len() as u64 {
+            return Err(Error::Parameter(format!(
+                "max edge {} would split the scene into {count} patches (at most {})",
+                max_edge.unwrap_or(0.0),
+                driver::MAX_PATCHES
+            )));
+        }
+        options.validate()?;
+        let patches = mesh::build_patches(scene, max_edge);
+        let mut relighter = Relighter::from_patches(scene, patches, options)?;
+        relighter.build_seconds = start.elapsed().as_secs_f64();
+        Ok(relighter)
+    }
+
+    /// Like [`Relighter::new`] for patches already built from `scene` with
+    /// [`mesh::build_patches`] (the command-line driver has them from loading).
+    ///
+    /// Errors: as [`Relighter::new`], and [`Error::Parameter`] when `patches` were not built
+    /// from a scene with as many triangles as `scene`.
+    pub fn from_patches(
+        scene: &Scene,
+        patches: Patches,
+        options: &SolverOptions,
+    ) -> Result<Relighter> {
+        let start = Instant::now();
+        check_scene(scene)?;
+        options.validate()?;
+        if patches.first.len() != scene.len() + 1
+            || patches.parent.len() != patches.len()
+            || patches.parent.iter().any(|&t| t as usize >= scene.len())
+        {
+            return Err(Error::Parameter(format!(
+                "the patches were built from a scene of {} triangles, not this one of {}",
+                patches.first.len().saturating_sub(1),
+                scene.len()
+            )));
+        }
+        for (t, &e) in scene.emission.iter().enumerate() {
+            check_radiance(e, || format!("emission of scene triangle {t}"))?;
+        }
+        let prepared = Prepared::new(&patches, options, false);
+        let material = (0..scene.len())
+            .map(|t| scene.material.get(t).copied().flatten())
+            .collect();
+        Ok(Relighter {
+            patches,
+            prepared,
+            emission: scene.emission.clone(),
+            material,
+            material_names: scene.material_names.clone(),
+            warm: None,
+            build_seconds: start.elapsed().as_secs_f64(),
+        })
+    }
+
+    /// Number of input triangles (the length of [`Relighter::emission`] and of every
+    /// `triangle_radiance`).
+    pub fn triangle_count(&self) -> usize {
+        self.emission.len()
+    }
+
+    /// The solver's patches. Their `emission` is the emission of the last solve (or of the
+    /// scene before the first one) divided by their `emission_scale`, so they render and export
+    /// consistently with the last solution.
+    pub fn patches(&self) -> &Patches {
+        &self.patches
+    }
+
+    /// The prepared tree and links (link counts, element counts, memory).
+    pub fn prepared(&self) -> &Prepared {
+        &self.prepared
+    }
+
+    /// Wall-clock seconds spent building patches, tree and links (paid once).
+    pub fn build_seconds(&self) -> f64 {
+        self.build_seconds
+    }
+
+    /// The current emission per input triangle, scene units (W / (m² sr), RGB).
+    pub fn emission(&self) -> &[[f64; 3]] {
+        &self.emission
+    }
+
+    /// The scene's material names (those [`Relighter::set_material_emission`] accepts).
+    pub fn material_names(&self) -> &[String] {
+        &self.material_names
+    }
+
+    /// Replaces the emission of every input triangle (scene units, RGB, input order). Takes
+    /// effect at the next solve.
+    ///
+    /// Errors: [`Error::Parameter`] when the length is not the triangle count or a value is
+    /// negative, NaN or infinite; the emission is then left unchanged.
+    pub fn set_emission(&mut self, per_triangle: &[[f64; 3]]) -> Result<()> {
+        if per_triangle.len() != self.emission.len() {
+            return Err(Error::Parameter(format!(
+                "emission has {} values but the scene has {} triangles",
+                per_triangle.len(),
+                self.emission.len()
+            )));
+        }
+        for (t, &e) in per_triangle.iter().enumerate() {
+            check_radiance(e, || format!("emission of triangle {t}"))?;
+        }
+        self.emission.copy_from_slice(per_triangle);
+        Ok(())
+    }
+
+    /// Sets the emission of input triangle `t` (scene units, RGB). Takes effect at the next
+    /// solve.
+    ///
+    /// Errors: [`Error::Parameter`] when `t` is out of range or a value is negative, NaN or
+    /// infinite (nothing changes).
+    pub fn set_triangle_emission(&mut self, t: usize, rgb: [f64; 3]) -> Result<()> {
+        if t >= self.emission.len() {
+            return Err(Error::Parameter(format!(
+                "triangle {t} out of range (the scene has {} triangles)",
+                self.emission.len()
+            )));
+        }
+        check_radiance(rgb, || format!("emission of triangle {t}"))?;
+        self.emission[t] = rgb;
+        Ok(())
+    }
+
+    /// Sets the emission of every triangle whose material is called `name` (scene units, RGB);
+    /// returns how many triangles that is. Takes effect at the next solve.
+    ///
+    /// Errors: [`Error::Parameter`] when no material has that name (the message lists the
+    /// names) or a value is negative, NaN or infinite (nothing changes).
+    pub fn set_material_emission(&mut self, name: &str, rgb: [f64; 3]) -> Result<usize> {
+        check_radiance(rgb, || format!("emission of material '{name}'"))?;
+        let ids: Vec<u32> = (0..self.material_names.len() as u32)
+            .filter(|&m| self.material_names[m as usize] == name)
+            .collect();
+        if ids.is_empty() {
+            let known = if self.material_names.is_empty() {
+                "the scene has no materials".to_string()
+            } else {
+                format!("materials: {}", self.material_names.join(", "))
+            };
+            return Err(Error::Parameter(format!(
+                "no material named '{name}' ({known})"
+            )));
+        }
+        let mut changed = 0;
+        for (t, m) in self.material.iter().enumerate() {
+            if m.is_some_and(|m| ids.contains(&m)) {
+                self.emission[t] = rgb;
+                changed += 1;
+            }
+        }
+        Ok(changed)
+    }
+
+    /// Forgets the last solution: the next solve starts from the emission, as a from-scratch
+    /// solve would (same links, so the same answer up to the tolerance).
+    pub fn forget_warm_start(&mut self) {
+        self.warm = None;
+    }
+
+    /// Solves for the current emission, warm-started from the previous solve when there is one.
+    /// Never fails: the emission was checked when it was set; no NaN reaches the solution.
+    pub fn solve(&mut self, progress: &Progress) -> Relit {
+        let start = Instant::now();
+        let brightest = self
+            .emission
+            .iter()
+            .flat_map(|e| e.iter().copied())
+            .fold(0.0f64, f64::max);
+        let scale = self.patches.emission_scale;
+        // Without a warm state the normalization is free: use the brightest emission, exactly
+        // as a from-scratch solve does. With one, keep its scale unless the lights drifted by
+        // more than RESCALE_FACTOR (then the old state is not worth keeping anyway).
+        if brightest > 0.0
+            && (self.warm.is_none()
+                || brightest > scale * RESCALE_FACTOR
+                || brightest < scale / RESCALE_FACTOR)
+        {
+            self.patches.emission_scale = brightest;
+            self.warm = None;
+        }
+        let scale = self.patches.emission_scale;
+        for (p, &t) in self.patches.parent.iter().enumerate() {
+            self.patches.emission[p] = self.emission[t as usize].map(|x| x / scale);
+        }
+        let warm = self.warm.take();
+        let warm_started = warm.is_some();
+        let (solution, state) = self.prepared.solve_with_emission(
+            &self.patches,
+            &self.patches.emission,
+            warm.as_ref(),
+            progress,
+        );
+        self.warm = Some(state);
+        Relit {
+            solution,
+            warm_started,
+            seconds: start.elapsed().as_secs_f64(),
+        }
+    }
+
+    /// Sets the emission of every input triangle ([`Relighter::set_emission`]) and solves
+    /// (without a progress bar).
+    ///
+    /// Errors: as [`Relighter::set_emission`]; nothing is solved then.
+    pub fn relight(&mut self, per_triangle: &[[f64; 3]]) -> Result<Relit> {
+        self.set_emission(per_triangle)?;
+        Ok(self.solve(&Progress::hidden()))
+    }
+}
+
+/// Rejects an emitted radiance with a negative, NaN or infinite channel.
+fn check_radiance(rgb: [f64; 3], what: impl FnOnce() -> String) -> Result<()> {
+    if rgb.iter().all(|&x| x.is_finite() && x >= 0.0) {
+        Ok(())
+    } else {
+        Err(Error::Parameter(format!(
+            "{} is ({}, {}, {}); each channel must be finite and >= 0",
+            what(),
+            rgb[0],
+            rgb[1],
+            rgb[2]
+        )))
+    }
+}
+
+/// Checks what [`mesh::build_patches`] assumes of a scene: triangles, every per-triangle array
+/// as long as the triangle list, vertex indices in range, finite vertices.
+fn check_scene(scene: &Scene) -> Result<()> {
+    let fail = |message: String| Error::Scene {
+        path: scene.path.clone(),
+        message,
+    };
+    if scene.is_empty() {
+        return Err(fail("no triangles".into()));
+    }
+    if scene.albedo.len() != scene.len() || scene.emission.len() != scene.len() {
+        return Err(fail(format!(
+            "{} triangles but {} albedo and {} emission values",
+            scene.len(),
+            scene.albedo.len(),
+            scene.emission.len()
+        )));
+    }
+    for (t, tri) in scene.triangles.iter().enumerate() {
+        if tri.iter().any(|&v| v as usize >= scene.positions.len()) {
+            return Err(fail(format!(
+                "triangle {t} has a vertex index out of range"
+            )));
+        }
+        if !scene.corners(t).iter().all(|p| p.is_finite()) {
+            return Err(fail(format!("triangle {t} has a non-finite vertex")));
+        }
+    }
+    Ok(())
+}
+
+// ---------------------------------------------------------------------------------------------
+// The animation of the command line
+
+/// Width (standard deviation) of the sweeping spot, as a fraction of the emitters' extent
+/// along the sweep axis.
+pub const SPOT_WIDTH: f64 = 0.15;
+
+/// Brightness factor (in `[dim, 1]`) of each emitter in frame `frame` of `frames` of a sweep.
+///
+/// A bright spot moves along the axis in which the emitters' `centroids` (world units) spread
+/// most, from the lowest to the highest coordinate over the frames (the middle when
+/// `frames == 1`). An emitter at normalized distance `d` from the spot gets
+/// `dim + (1 - dim) exp(-(d / SPOT_WIDTH)² / 2)`. When the emitters do not spread (a single
+/// emitter, or all at one point) they all pulse together instead: `dim` at the ends, 1 in the
+/// middle frame. Preconditions: `frame < frames`, `dim` in [0, 1].
+pub fn sweep_weights(centroids: &[DVec3], frame: usize, frames: usize, dim: f64) -> Vec<f64> {
+    let phase = if frames > 1 {
+        frame as f64 / (frames - 1) as f64
+    } else {
+        0.5
+    };
+    let (lo, hi) = centroids.iter().fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(lo, hi), &c| (lo.min(c), hi.max(c)),
+    );
+    let extent = hi - lo;
+    let axis = if extent.x >= extent.y && extent.x >= extent.z {
+        0
+    } else if extent.y >= extent.z {
+        1
+    } else {
+        2
+    };
+    let span = extent[axis];
+    if !(span > 0.0 && span.is_finite()) {
+        let pulse = dim + (1.0 - dim) * (std::f64::consts::PI * phase).sin();
+        return vec![pulse.clamp(dim, 1.0); centroids.len()];
+    }
+    centroids
+        .iter()
+        .map(|c| {
+            let d = (c[axis] - lo[axis]) / span - phase;
+            dim + (1.0 - dim) * (-0.5 * (d / SPOT_WIDTH).powi(2)).exp()
+        })
+        .collect()
+}
+
+/// The camera of the frames.
+#[derive(Args, Clone, Debug)]
+#[command(next_help_heading = "Picture options")]
+pub struct FrameCameraArgs {
+    /// Camera position in scene units (automatic framing by default, fixed for every frame).
+    #[arg(long, value_name = "X,Y,Z", value_parser = driver::parse_point, allow_hyphen_values = true)]
+    pub eye: Option<DVec3>,
+    /// Point the camera looks at, in scene units.
+    #[arg(long, value_name = "X,Y,Z", value_parser = driver::parse_point, allow_hyphen_values = true)]
+    pub target: Option<DVec3>,
+    /// Vertical field of view, degrees.
+    #[arg(
+        long,
+        value_name = "DEG",
+        default_value_t = 50.0,
+        allow_negative_numbers = true
+    )]
+    pub fov: f64,
+    /// Frame width in pixels.
+    #[arg(long, value_name = "W", default_value_t = 400)]
+    pub width: u32,
+    /// Frame height in pixels.
+    #[arg(long, value_name = "H", default_value_t = 300)]
+    pub height: u32,
+    /// Multiplier applied to B before the sRGB curve, the same for every frame; by default the
+    /// automatic exposure of the first frame (95th percentile of lit, non-emissive radiance to
+    /// 0.8) is kept for all frames, so brightness changes show.
+    #[arg(long, value_name = "X", allow_negative_numbers = true)]
+    pub exposure: Option<f64>,
+    /// Smooth (Gouraud) shading instead of one constant B per patch.
+    #[arg(long)]
+    pub smooth: bool,
+}
+
+impl FrameCameraArgs {
+    /// The camera options (eye and target possibly still automatic).
+    pub fn camera(&self) -> CameraOptions {
+        CameraOptions {
+            eye: self.eye,
+            target: self.target,
+            fov_deg: self.fov,
+            width: self.width,
+            height: self.height,
+            exposure: self.exposure,
+        }
+    }
+}
+
+/// `antiradiance relight`: animate the lights of a scene, one relight per frame.
+#[derive(Args, Clone, Debug)]
+pub struct RelightArgs {
+    #[command(flatten)]
+    pub scene: SceneArgs,
+    #[command(flatten)]
+    pub solver_args: SolverArgs,
+    /// Number of frames (1..=10000): a bright spot sweeps across the emitting triangles.
+    #[arg(long, value_name = "N", help_heading = "Animation options")]
+    pub frames: usize,
+    /// Fraction of its own emission an emitter keeps far from the spot, in [0, 1].
+    #[arg(
+        long,
+        value_name = "F",
+        default_value_t = 0.1,
+        allow_negative_numbers = true,
+        help_heading = "Animation options"
+    )]
+    pub dim: f64,
+    /// Directory for the frames `frame_0000.png`, `frame_0001.png`, ... (created when missing;
+    /// its parent must exist; existing frames of the same names are replaced).
+    #[arg(long, value_name = "DIR", help_heading = "Output options")]
+    pub out: PathBuf,
+    /// JSON report: one-time build seconds, per-frame solve seconds and iterations.
+    #[arg(long, value_name = "OUT.json", help_heading = "Output options")]
+    pub report: Option<PathBuf>,
+    #[command(flatten)]
+    pub camera: FrameCameraArgs,
+    /// No progress bar (the summary line on stdout is still printed).
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+/// Largest `--frames` (frame names have four digits).
+pub const MAX_FRAMES: usize = 10_000;
+
+/// One frame of `relight`, as it appears in the report.
+#[derive(Clone, Debug, Serialize)]
+pub struct FrameRecord {
+    /// Frame number (0-based), also in the file name.
+    pub frame: usize,
+    /// Wall-clock seconds of the relight (solve only).
+    pub seconds: f64,
+    /// Seconds to render and write the picture.
+    pub render_seconds: f64,
+    /// Jacobi sweeps of the relight.
+    pub iterations: usize,
+    /// Final residual.
+    pub residual: f64,
+    /// True when the tolerance was reached before the iteration cap.
+    pub converged: bool,
+    /// True when the relight started from the previous frame's solution.
+    pub warm_started: bool,
+    /// Total emitted power of the frame relative to the scene's own emission (sum of a_t E_t,
+    /// mean over RGB), in [dim, 1].
+    pub relative_power: f64,
+}
+
+/// Timing figures over the frames of a `relight` run, seconds.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct FrameSummary {
+    /// Mean relight time over all frames.
+    pub mean_seconds: f64,
+    /// Mean over the warm-started frames (all but the first); `None` with one frame.
+    pub mean_warm_seconds: Option<f64>,
+    /// Fastest relight.
+    pub min_seconds: f64,
+    /// Slowest relight.
+    pub max_seconds: f64,
+    /// Mean iterations per relight.
+    pub mean_iterations: f64,
+}
+
+impl FrameSummary {
+    /// The summary of `frames` (all zero when empty).
+    pub fn of(frames: &[FrameRecord]) -> FrameSummary {
+        if frames.is_empty() {
+            return FrameSummary::default();
+        }
+        let n = frames.len() as f64;
+        let warm: Vec<f64> = frames
+            .iter()
+            .filter(|f| f.warm_started)
+            .map(|f| f.seconds)
+            .collect();
+        FrameSummary {
+            mean_seconds: frames.iter().map(|f| f.seconds).sum::<f64>() / n,
+            mean_warm_seconds: (!warm.is_empty())
+                .then(|| warm.iter().sum::<f64>() / warm.len() as f64),
+            min_seconds: frames
+                .iter()
+                .map(|f| f.seconds)
+                .fold(f64::INFINITY, f64::min),
+            max_seconds: frames.iter().map(|f| f.seconds).fold(0.0, f64::max),
+            mean_iterations: frames.iter().map(|f| f.iterations as f64).sum::<f64>() / n,
+        }
+    }
+}
+
+/// The file of frame `frame` in `dir`: `frame_0000.png`, ...
+pub fn frame_path(dir: &Path, frame: usize) -> PathBuf {
+    dir.join(format!("frame_{frame:04}.png"))
+}
+
+/// Checks `--out`: an existing directory, or a missing one whose parent exists; not a file.
+fn check_out_dir(dir: &Path) -> Result<()> {
+    let fail = |message: &str| Error::Io {
+        path: dir.to_path_buf(),
+        message: message.to_string(),
+    };
+    if dir.exists() {
+        if !dir.is_dir() {
+            return Err(fail("--out must be a directory, and this is a file"));
+        }
+        return Ok(());
+    }
+    let parent = match dir.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    if !parent.is_dir() {
+        return Err(fail(&format!(
+            "--out: parent directory {} does not exist",
+            parent.display()
+        )));
+    }
+    Ok(())
+}
+
+/// `antiradiance relight`: builds tree and links once, then for each frame sets the emission of
+/// the sweep ([`sweep_weights`]), relights (warm start), and writes `DIR/frame_NNNN.png` with a
+/// camera and an exposure fixed across frames. Prints one summary line on stdout (build time,
+/// time per relight) and writes the report when asked.
+///
+/// Errors (one line each, nothing solved): bad scene, solver or picture parameter, `--frames`
+/// outside 1..=[`MAX_FRAMES`], `--dim` outside [0, 1], `--out` not a directory or its parent
+/// missing, a bad `--report` path, a scene without emitters; a failed write names its file.
+pub fn relight(args: &RelightArgs) -> Result<()> {
+    let start = Instant::now();
+    let mut timings = Timings::default();
+    args.scene.validate()?;
+    let options = args.solver_args.options()?;
+    if !(1..=MAX_FRAMES).contains(&args.frames) {
+        return Err(Error::Parameter(format!(
+            "--frames {} outside 1..={MAX_FRAMES}",
+            args.frames
+        )));
+    }
+    if !(0.0..=1.0).contains(&args.dim) {
+        return Err(Error::Parameter(format!(
+            "--dim {} outside [0, 1]",
+            args.dim
+        )));
+    }
+    let camera = args.camera.camera();
+    driver::check_camera(&camera)?;
+    check_out_dir(&args.out)?;
+    let report_files: Vec<(&str, &Path)> = args
+        .report
+        .iter()
+        .map(|p| ("--report", p.as_path()))
+        .collect();
+    driver::check_outputs(&report_files, &args.scene.scene)?;
+
+    let loaded = driver::load(&args.scene, &mut timings)?;
+    let emitters: Vec<usize> = (0..loaded.scene.len())
+        .filter(|&t| loaded.scene.is_emitter(t))
+        .collect();
+    if emitters.is_empty() {
+        return Err(Error::Scene {
+            path: args.scene.scene.clone(),
+            message: "no emitting triangle to animate (give a material Ke, or use --emit-above)"
+                .into(),
+        });
+    }
+    let mut relighter = driver::timed(&mut timings.build, || {
+        Relighter::from_patches(&loaded.scene, loaded.patches.clone(), &options)
+    })?;
+    let build_seconds = relighter.build_seconds();
+
+    // The camera is resolved once, so every frame has the same view.
+    let (eye, target) = render::resolve_view(relighter.patches(), &camera);
+    let mut camera = CameraOptions {
+        eye: Some(eye),
+        target: Some(target),
+        ..camera
+    };
+    let shading = if args.camera.smooth {
+        Shading::Smooth
+    } else {
+        Shading::Flat
+    };
+    if !args.out.exists() {
+        std::fs::create_dir(&args.out).map_err(|e| Error::io(&args.out, e))?;
+    }
+
+    let base = loaded.scene.emission.clone();
+    let centroids: Vec<DVec3> = emitters
+        .iter()
+        .map(|&t| {
+            let [a, b, c] = loaded.scene.corners(t);
+            (a + b + c) / 3.0
+        })
+        .collect();
+    let power = |emission: &[[f64; 3]]| -> f64 {
+        emitters
+            .iter()
+            .map(|&t| loaded.scene.area(t) * emission[t].iter().sum::<f64>() / 3.0)
+            .sum()
+    };
+    let base_power = power(&base);
+    let progress = Progress::new("relight", args.frames as u64, !args.quiet);
+    let mut records = Vec::with_capacity(args.frames);
+    for frame in 0..args.frames {
+        let weights = sweep_weights(&centroids, frame, args.frames, args.dim);
+        let mut emission = base.clone();
+        for (&t, w) in emitters.iter().zip(&weights) {
+            emission[t] = base[t].map(|x| x * w);
+        }
+        let relit = relighter.relight(&emission)?;
+        timings.solve += relit.seconds;
+        if camera.exposure.is_none() {
+            camera.exposure = Some(render::auto_exposure(relighter.patches(), &relit.solution));
+        }
+        let render_start = Instant::now();
+        render::render_png_shaded(
+            &frame_path(&args.out, frame),
+            relighter.patches(),
+            &relit.solution,
+            &camera,
+            shading,
+        )?;
+        let render_seconds = render_start.elapsed().as_secs_f64();
+        timings.output += render_seconds;
+        let stats = &relit.solution.stats;
+        records.push(FrameRecord {
+            frame,
+            seconds: relit.seconds,
+            render_seconds,
+            iterations: stats.iterations,
+            residual: sanitize(stats.residual),
+            converged: stats.converged,
+            warm_started: relit.warm_started,
+            relative_power: if base_power > 0.0 {
+                sanitize(power(&emission) / base_power)
+            } else {
+                0.0
+            },
+        });
+        progress.inc(1);
+        progress.message(format!("{:.0} ms per relight", 1e3 * relit.seconds));
+    }
+    progress.finish();
+    timings.total = start.elapsed().as_secs_f64();
+    let peak = memory::peak_rss_bytes();
+    let summary = FrameSummary::of(&records);
+
+    if let Some(path) = &args.report {
+        let mut report = Report::new("relight", &args.scene.scene, &loaded);
+        report
+            .insert(
+                "parameters",
+                json!({
+                    "solver": "hierarchical",
+                    "preset": args.solver_args.preset_name(),
+                    "solver_options": options,
+                    "scene_options": args.scene.to_json(),
+                    "frames": args.frames,
+                    "dim": args.dim,
+                    "exposure": camera.exposure,
+                    "eye": [eye.x, eye.y, eye.z],
+                    "target": [target.x, target.y, target.z],
+                    "width": camera.width,
+                    "height": camera.height,
+                    "out": args.out.display().to_string(),
+                }),
+            )
+            .insert("build_seconds", build_seconds)
+            .insert(
+                "hierarchy",
+                json!({
+                    "links": relighter.prepared().links.len(),
+                    "elements": relighter.prepared().element_count(),
+                    "solver_bytes": relighter.prepared().bytes(),
+                }),
+            )
+            .insert("summary", summary)
+            .insert("frames", &records)
+            .finish(&timings, peak);
+        report.write(path)?;
+    }
+    println!(
+        "{}",
+        relight_summary(&loaded, args, build_seconds, &summary)
+    );
+    Ok(())
+}
+
+/// The line `relight` prints on stdout when done.
+fn relight_summary(
+    loaded: &driver::Loaded,
+    args: &RelightArgs,
+    build_seconds: f64,
+    summary: &FrameSummary,
+) -> String {
+    let warm = match summary.mean_warm_seconds {
+        Some(s) => format!(", {:.1} ms per warm-started relight", 1e3 * s),
+        None => String::new(),
+    };
+    format!(
+        "Relit {} ({} triangles, {} patches) over {} frames: build {:.2} s once, then {:.1} ms per relight on average{warm} (min {:.1} ms, max {:.1} ms, {:.1} iterations); frames in {}.",
+        args.scene.scene.display(),
+        loaded.scene.len(),
+        loaded.patches.len(),
+        args.frames,
+        build_seconds,
+        1e3 * summary.mean_seconds,
+        1e3 * summary.min_seconds,
+        1e3 * summary.max_seconds,
+        summary.mean_iterations,
+        args.out.display()
+    )
+}

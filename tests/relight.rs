@@ -1,0 +1,617 @@
+//! Interactive relighting (`antiradiance::relight`): relit solutions against from-scratch
+//! solves, warm starts, per-material emission, bad input, and the `relight` command.
+//!
+//! Scenes are small (the Cornell box, a 7-triangle test scene) so the whole file runs in
+//! seconds in release.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use antiradiance::driver::error_against;
+use antiradiance::hierarchical::solve_hierarchical;
+use antiradiance::mesh::build_patches;
+use antiradiance::progress::Progress;
+use antiradiance::relight::{frame_path, sweep_weights, Relighter};
+use antiradiance::scene::{load_obj, Scene, SceneOptions};
+use antiradiance::scenes::{self, CORNELL_BOX_PARTS};
+use antiradiance::solution::Solution;
+use antiradiance::solve::SolverOptions;
+use antiradiance::Error;
+use glam::DVec3;
+use serde_json::Value;
+
+// ---------------------------------------------------------------------------------------------
+// Helpers
+
+/// Index range of a named part of the Cornell box (see `CORNELL_BOX_PARTS`).
+fn cornell_part(name: &str) -> std::ops::Range<usize> {
+    let mut start = 0;
+    for (part, count) in CORNELL_BOX_PARTS {
+        if part == name {
+            return start..start + count;
+        }
+        start += count;
+    }
+    panic!("no part {name}");
+}
+
+/// `scene` with its emission replaced.
+fn with_emission(scene: &Scene, emission: &[[f64; 3]]) -> Scene {
+    let mut s = scene.clone();
+    s.emission = emission.to_vec();
+    s
+}
+
+/// A from-scratch hierarchical solve of `scene` (new patches, tree, links; cold start).
+fn from_scratch(scene: &Scene, options: &SolverOptions) -> Solution {
+    solve_hierarchical(&build_patches(scene, None), options, &Progress::hidden())
+}
+
+fn assert_finite(solution: &Solution) {
+    for b in solution
+        .triangle_radiance
+        .iter()
+        .chain(&solution.patch_radiance)
+    {
+        assert!(b.iter().all(|x| x.is_finite() && *x >= 0.0), "{b:?}");
+    }
+}
+
+/// Mean of the red channel of the given triangles.
+fn mean_red(solution: &Solution, triangles: std::ops::Range<usize>) -> f64 {
+    let n = triangles.len() as f64;
+    triangles
+        .map(|t| solution.triangle_radiance[t][0])
+        .sum::<f64>()
+        / n
+}
+
+// ---------------------------------------------------------------------------------------------
+// Relit solutions equal from-scratch solutions
+
+#[test]
+fn relit_frames_match_from_scratch_solves_within_one_percent() {
+    let scene = scenes::cornell_box();
+    let options = SolverOptions::default();
+    let mut relighter = Relighter::new(&scene, None, &options).unwrap();
+    let light = cornell_part("light");
+    let ceiling = cornell_part("ceiling");
+
+    // A sequence of frames: the light as built, one half dimmed and tinted, the light off and
+    // two ceiling triangles (no emitters at build time) glowing blue, then the light back.
+    let mut frames = vec![scene.emission.clone()];
+    let mut e = scene.emission.clone();
+    e[light.start] = [2.0, 6.0, 1.0];
+    frames.push(e);
+    let mut e = scene.emission.clone();
+    for t in light.clone() {
+        e[t] = [0.0; 3];
+    }
+    e[ceiling.start] = [1.0, 2.0, 30.0];
+    e[ceiling.start + 1] = [1.0, 2.0, 30.0];
+    frames.push(e);
+    frames.push(scene.emission.clone());
+
+    for (f, emission) in frames.iter().enumerate() {
+        let relit = relighter.relight(emission).unwrap();
+        assert_eq!(relit.warm_started, f > 0, "frame {f}");
+        assert_finite(&relit.solution);
+        assert_eq!(relit.solution.triangle_radiance.len(), scene.len());
+        let truth_scene = with_emission(&scene, emission);
+        let truth = from_scratch(&truth_scene, &options);
+        let err = error_against(&truth_scene, &relit.solution, &truth);
+        assert!(err < 0.01, "frame {f}: {:.3}% from scratch", 100.0 * err);
+        // Emitters keep their own radiance on top of what they reflect.
+        for (t, (e, b)) in emission
+            .iter()
+            .zip(&relit.solution.triangle_radiance)
+            .enumerate()
+        {
+            for (e_c, b_c) in e.iter().zip(b) {
+                assert!(*b_c >= e_c * (1.0 - 1e-9), "frame {f} triangle {t}");
+            }
+        }
+    }
+    // The relighter's patches describe the last frame's emission (for rendering).
+    let p = relighter.patches();
+    for (patch, &t) in p.parent.iter().enumerate() {
+        let e = frames[3][t as usize];
+        for (normalized, e_c) in p.emission[patch].iter().zip(e) {
+            assert!((normalized * p.emission_scale - e_c).abs() <= 1e-12 * e_c);
+        }
+    }
+}
+
+#[test]
+fn scene_without_emitters_at_build_time_relights_in_scene_units() {
+    let lit = scenes::cornell_box();
+    let dark = with_emission(&lit, &vec![[0.0; 3]; lit.len()]);
+    let options = SolverOptions::fast();
+    let mut relighter = Relighter::new(&dark, None, &options).unwrap();
+
+    // Nothing emits: all zero, no NaN.
+    let relit = relighter.solve(&Progress::hidden());
+    assert_finite(&relit.solution);
+    assert!(relit
+        .solution
+        .triangle_radiance
+        .iter()
+        .all(|b| *b == [0.0; 3]));
+
+    // The Cornell light switched on: the same answer, in the same units, as a scene built lit.
+    let relit = relighter.relight(&lit.emission).unwrap();
+    let truth = from_scratch(&lit, &options);
+    let err = error_against(&lit, &relit.solution, &truth);
+    assert!(err < 0.01, "{:.3}%", 100.0 * err);
+    let floor = cornell_part("floor");
+    let (relit_floor, truth_floor) = (
+        mean_red(&relit.solution, floor.clone()),
+        mean_red(&truth, floor),
+    );
+    assert!(truth_floor > 0.01, "{truth_floor}");
+    assert!((relit_floor - truth_floor).abs() < 0.01 * truth_floor);
+
+    // Brightness far beyond the warm state's scale (x 1e12, then x 1e-12): linear results,
+    // nothing overflows in the solver's f32 antiradiance.
+    for factor in [1e12, 1e-12] {
+        let bright: Vec<[f64; 3]> = lit.emission.iter().map(|e| e.map(|x| x * factor)).collect();
+        let relit = relighter.relight(&bright).unwrap();
+        assert_finite(&relit.solution);
+        let scaled = mean_red(&relit.solution, cornell_part("floor"));
+        assert!(
+            (scaled / factor - truth_floor).abs() < 0.01 * truth_floor,
+            "x{factor}: {scaled}"
+        );
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Warm starts
+
+#[test]
+fn warm_start_takes_fewer_iterations_than_cold_for_a_small_change() {
+    let scene = scenes::cornell_box();
+    let options = SolverOptions::default();
+    let mut relighter = Relighter::new(&scene, None, &options).unwrap();
+    relighter.solve(&Progress::hidden());
+
+    // One light triangle 10% brighter.
+    let mut e = scene.emission.clone();
+    let t = cornell_part("light").start;
+    e[t] = e[t].map(|x| 1.1 * x);
+    let warm = relighter.relight(&e).unwrap();
+    relighter.forget_warm_start();
+    let cold = relighter.relight(&e).unwrap();
+    assert!(warm.warm_started && !cold.warm_started);
+    assert!(warm.solution.stats.converged && cold.solution.stats.converged);
+    let (wi, ci) = (
+        warm.solution.stats.iterations,
+        cold.solution.stats.iterations,
+    );
+    assert!(wi < ci, "warm {wi} iterations, cold {ci}");
+    let err = error_against(&scene, &warm.solution, &cold.solution);
+    assert!(err < 0.01, "{:.3}%", 100.0 * err);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Per-material emission
+
+/// A floor under two lamps of different materials (lampA at x < 0, lampB at x > 0) under a
+/// white ceiling, plus a triangle without a material and one with an undefined material: 10
+/// triangles.
+///
+/// Triangles in file order: 0 no material (before any `usemtl`), 1-2 floor (white, facing up),
+/// 3-4 lampA (facing down), 5-6 lampB (facing down), 7-8 ceiling (white, facing down), 9 the
+/// undefined material `ghost`. The MTL file also defines `unused`, which no face uses.
+const LAMPS_OBJ: &str = "\
+mtllib lamps.mtl
+v -1 0 -1
+v 1 0 -1
+v 1 0 1
+v -1 0 1
+v -0.8 1 -0.2
+v -0.4 1 -0.2
+v -0.4 1 0.2
+v -0.8 1 0.2
+v 0.4 1 -0.2
+v 0.8 1 -0.2
+v 0.8 1 0.2
+v 0.4 1 0.2
+v -1 1.01 -1
+v 1 1.01 -1
+v 1 1.01 1
+v -1 1.01 1
+v 3 0 0
+v 4 0 0
+v 3 0 1
+v 3 0 2
+v 4 0 2
+v 3 0 3
+f 17 19 18
+usemtl white
+f 1 4 3 2
+usemtl lampA
+f 5 6 7 8
+usemtl lampB
+f 9 10 11 12
+usemtl white
+f 13 14 15 16
+usemtl ghost
+f 20 22 21
+";
+
+const LAMPS_MTL: &str = "\
+newmtl white
+Kd 0.7 0.7 0.7
+newmtl lampA
+Kd 0.1 0.1 0.1
+Ke 5 5 5
+newmtl lampB
+Kd 0.1 0.1 0.1
+Ke 1 1 1
+newmtl unused
+Kd 0.5 0.5 0.5
+";
+
+/// Writes the lamps scene into `dir`; returns the OBJ path.
+fn lamps_scene(dir: &Path) -> PathBuf {
+    std::fs::write(dir.join("lamps.mtl"), LAMPS_MTL).unwrap();
+    let path = dir.join("lamps.obj");
+    std::fs::write(&path, LAMPS_OBJ).unwrap();
+    path
+}
+
+#[test]
+fn scene_keeps_material_identity_per_triangle() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = load_obj(&lamps_scene(dir.path()), &SceneOptions::default()).unwrap();
+    assert_eq!(scene.len(), 10);
+    assert_eq!(scene.material.len(), scene.len());
+    let names: Vec<Option<&str>> = (0..scene.len()).map(|t| scene.material_name(t)).collect();
+    assert_eq!(
+        names,
+        [
+            None, // before any usemtl
+            Some("white"),
+            Some("white"),
+            Some("lampA"),
+            Some("lampA"),
+            Some("lampB"),
+            Some("lampB"),
+            Some("white"),
+            Some("white"),
+            None, // ghost is not defined
+        ]
+    );
+    for name in ["white", "lampA", "lampB", "unused"] {
+        assert!(scene.material_names.iter().any(|n| n == name), "{name}");
+    }
+    // Materials still give albedo and emission as before.
+    assert_eq!(scene.emission[3], [5.0; 3]);
+    assert_eq!(scene.emission[5], [1.0; 3]);
+    // Scenes built in code have no materials.
+    let cornell = scenes::cornell_box();
+    assert_eq!(cornell.material, vec![None; cornell.len()]);
+    assert_eq!(cornell.material_name(0), None);
+}
+
+#[test]
+fn per_material_emission_matches_a_scene_with_that_emission() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = load_obj(&lamps_scene(dir.path()), &SceneOptions::default()).unwrap();
+    let options = SolverOptions::default();
+    let mut relighter = Relighter::new(&scene, None, &options).unwrap();
+    let before = relighter.solve(&Progress::hidden());
+
+    // Swap the lamps: A off, B bright and red.
+    assert_eq!(
+        relighter.set_material_emission("lampA", [0.0; 3]).unwrap(),
+        2
+    );
+    assert_eq!(
+        relighter
+            .set_material_emission("lampB", [8.0, 1.0, 1.0])
+            .unwrap(),
+        2
+    );
+    assert_eq!(
+        relighter.set_material_emission("unused", [3.0; 3]).unwrap(),
+        0
+    );
+    let mut expected = scene.emission.clone();
+    expected[3] = [0.0; 3];
+    expected[4] = [0.0; 3];
+    expected[5] = [8.0, 1.0, 1.0];
+    expected[6] = [8.0, 1.0, 1.0];
+    assert_eq!(relighter.emission(), &expected[..]);
+    let after = relighter.solve(&Progress::hidden());
+    assert!(after.warm_started);
+    let truth_scene = with_emission(&scene, &expected);
+    let truth = from_scratch(&truth_scene, &options);
+    let err = error_against(&truth_scene, &after.solution, &truth);
+    assert!(err < 0.01, "{:.3}%", 100.0 * err);
+
+    // The floor (triangles 1-2) turned red.
+    let floor = |s: &Solution| {
+        let b = s.triangle_radiance[1];
+        let c = s.triangle_radiance[2];
+        [b[0] + c[0], b[1] + c[1]]
+    };
+    let (old, new) = (floor(&before.solution), floor(&after.solution));
+    assert!(old[0] > 0.0 && (old[0] - old[1]).abs() < 1e-9 * old[0]);
+    assert!(new[0] > 3.0 * new[1], "{new:?}");
+
+    // Per triangle works as well: the undefined-material triangle can still be lit by index.
+    relighter.set_triangle_emission(9, [0.5; 3]).unwrap();
+    let relit = relighter.solve(&Progress::hidden());
+    assert!(relit.solution.triangle_radiance[9]
+        .iter()
+        .all(|&b| b >= 0.5));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Bad input
+
+fn assert_parameter_error<T: std::fmt::Debug>(result: antiradiance::Result<T>, needle: &str) {
+    match result {
+        Err(Error::Parameter(message)) => {
+            assert!(message.contains(needle), "{needle}: {message}");
+            assert!(!message.contains('\n'), "{message}");
+        }
+        other => panic!("{needle}: expected a parameter error, got {other:?}"),
+    }
+}
+
+#[test]
+fn bad_emission_is_rejected_and_changes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = load_obj(&lamps_scene(dir.path()), &SceneOptions::default()).unwrap();
+    let mut relighter = Relighter::new(&scene, None, &SolverOptions::fast()).unwrap();
+    let original = relighter.emission().to_vec();
+
+    assert_parameter_error(relighter.set_emission(&original[1..]), "9 values");
+    let mut longer = original.clone();
+    longer.push([1.0; 3]);
+    assert_parameter_error(relighter.relight(&longer), "11 values");
+    for bad in [-1.0, f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+        let mut e = original.clone();
+        e[7] = [1.0, bad, 1.0];
+        assert_parameter_error(relighter.set_emission(&e), "triangle 7");
+        assert_parameter_error(relighter.relight(&e), "triangle 7");
+        assert_parameter_error(
+            relighter.set_triangle_emission(2, [bad, 0.0, 0.0]),
+            "triangle 2",
+        );
+        assert_parameter_error(relighter.set_material_emission("lampA", [bad; 3]), "lampA");
+    }
+    assert_parameter_error(
+        relighter.set_triangle_emission(10, [1.0; 3]),
+        "out of range",
+    );
+    assert_parameter_error(
+        relighter.set_material_emission("lampC", [1.0; 3]),
+        "lampA, lampB",
+    );
+    assert_eq!(relighter.emission(), &original[..]);
+    // No solve happened through a failed call: the first solve is still cold.
+    assert!(!relighter.solve(&Progress::hidden()).warm_started);
+
+    // Bad construction.
+    let bad_options = SolverOptions {
+        bins: 0,
+        ..SolverOptions::default()
+    };
+    assert_parameter_error(
+        Relighter::new(&scene, None, &bad_options).map(|_| ()),
+        "--bins",
+    );
+    assert_parameter_error(
+        Relighter::new(&scene, Some(0.0), &SolverOptions::fast()).map(|_| ()),
+        "max edge",
+    );
+    let mut nan_scene = scene.clone();
+    nan_scene.emission[4] = [f64::NAN; 3];
+    assert_parameter_error(
+        Relighter::new(&nan_scene, None, &SolverOptions::fast()).map(|_| ()),
+        "triangle 4",
+    );
+    assert!(matches!(
+        Relighter::new(&Scene::default(), None, &SolverOptions::fast()),
+        Err(Error::Scene { .. })
+    ));
+    let other = build_patches(&scenes::cornell_box(), None);
+    assert_parameter_error(
+        Relighter::from_patches(&scene, other, &SolverOptions::fast()).map(|_| ()),
+        "46 triangles",
+    );
+}
+
+// ---------------------------------------------------------------------------------------------
+// The sweep of the command line
+
+#[test]
+fn sweep_moves_a_spot_across_the_emitters() {
+    let centroids: Vec<DVec3> = (0..5).map(|i| DVec3::new(i as f64, 2.0, 0.5)).collect();
+    let frames = 5;
+    for frame in 0..frames {
+        let w = sweep_weights(&centroids, frame, frames, 0.1);
+        assert!(w.iter().all(|&x| (0.1..=1.0).contains(&x)), "{w:?}");
+        let brightest = (0..5).max_by(|&a, &b| w[a].total_cmp(&w[b])).unwrap();
+        assert_eq!(brightest, frame, "{w:?}");
+        assert!((w[frame] - 1.0).abs() < 1e-12);
+    }
+    // A single emitter pulses: dim at the ends, full in the middle.
+    let one = [DVec3::ZERO];
+    assert!((sweep_weights(&one, 0, 3, 0.2)[0] - 0.2).abs() < 1e-12);
+    assert!((sweep_weights(&one, 1, 3, 0.2)[0] - 1.0).abs() < 1e-12);
+    assert!((sweep_weights(&one, 0, 1, 0.2)[0] - 1.0).abs() < 1e-12);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The command line
+
+fn run(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_antiradiance"))
+        .args(args)
+        .output()
+        .expect("run the antiradiance binary")
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 temp path")
+}
+
+fn png_size(path: &Path) -> (u32, u32) {
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let reader = decoder.read_info().unwrap();
+    let info = reader.info();
+    (info.width, info.height)
+}
+
+#[test]
+fn cli_writes_one_frame_per_relight_and_a_report() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = lamps_scene(dir.path());
+    let out = dir.path().join("frames");
+    let report = dir.path().join("relight.json");
+    let o = run(&[
+        "relight",
+        s(&scene),
+        "--frames",
+        "4",
+        "--out",
+        s(&out),
+        "--report",
+        s(&report),
+        "--preset",
+        "fast",
+        "--width",
+        "64",
+        "--height",
+        "48",
+        "--quiet",
+    ]);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{stdout} {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert_eq!(stdout.lines().count(), 1, "{stdout}");
+    assert!(stdout.starts_with("Relit "), "{stdout}");
+    assert!(stdout.contains("ms per relight"), "{stdout}");
+    for frame in 0..4 {
+        assert_eq!(
+            png_size(&frame_path(&out, frame)),
+            (64, 48),
+            "frame {frame}"
+        );
+    }
+    assert!(!frame_path(&out, 4).exists());
+    // Fixed camera and exposure, moving light: the frames differ.
+    let first = std::fs::read(frame_path(&out, 0)).unwrap();
+    let last = std::fs::read(frame_path(&out, 3)).unwrap();
+    assert_ne!(first, last);
+
+    let json: Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_eq!(json["command"], "relight");
+    assert_eq!(json["parameters"]["frames"], 4);
+    assert!(json["parameters"]["exposure"].as_f64().unwrap() > 0.0);
+    assert!(json["build_seconds"].as_f64().unwrap() > 0.0);
+    assert!(json["hierarchy"]["links"].as_u64().unwrap() > 0);
+    let frames = json["frames"].as_array().unwrap();
+    assert_eq!(frames.len(), 4);
+    for (f, frame) in frames.iter().enumerate() {
+        assert_eq!(frame["frame"], f);
+        assert!(frame["seconds"].as_f64().unwrap() > 0.0);
+        assert!(frame["iterations"].as_u64().unwrap() >= 1);
+        assert_eq!(frame["warm_started"], f > 0);
+        let power = frame["relative_power"].as_f64().unwrap();
+        assert!((0.1..=1.0 + 1e-12).contains(&power), "{power}");
+    }
+    let mean = json["summary"]["mean_seconds"].as_f64().unwrap();
+    assert!(mean > 0.0);
+    assert!(json["summary"]["mean_warm_seconds"].as_f64().unwrap() > 0.0);
+    assert!(json["time_seconds"]["total"].as_f64().unwrap() > 0.0);
+}
+
+#[test]
+fn cli_fails_cleanly_on_bad_arguments() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = lamps_scene(dir.path());
+    let out = dir.path().join("frames");
+    let a_file = dir.path().join("lamps.mtl");
+    let dark = dir.path().join("dark.obj");
+    std::fs::write(&dark, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    let missing = dir.path().join("missing.obj");
+    let no_parent = dir.path().join("no-such-dir").join("frames");
+
+    let base = |scene: &Path, out: &Path| -> Vec<String> {
+        vec![
+            "relight".into(),
+            s(scene).into(),
+            "--out".into(),
+            s(out).into(),
+            "--quiet".into(),
+        ]
+    };
+    let cases: Vec<(Vec<String>, &str, i32)> = vec![
+        (vec!["--frames".into(), "0".into()], "--frames", 1),
+        (
+            vec!["--frames".into(), "2".into(), "--dim".into(), "1.5".into()],
+            "--dim",
+            1,
+        ),
+        (
+            vec!["--frames".into(), "2".into(), "--bins".into(), "0".into()],
+            "--bins",
+            1,
+        ),
+        (
+            vec![
+                "--frames".into(),
+                "2".into(),
+                "--exposure".into(),
+                "-1".into(),
+            ],
+            "--exposure",
+            1,
+        ),
+        (vec!["--frames".into(), "abc".into()], "--frames", 2),
+        (vec![], "--frames", 2),
+    ];
+    for (extra, needle, code) in cases {
+        let mut args = base(&scene, &out);
+        args.extend(extra);
+        let o = Command::new(env!("CARGO_BIN_EXE_antiradiance"))
+            .args(&args)
+            .output()
+            .unwrap();
+        expect_one_line_error(&o, needle, code);
+        assert!(!out.exists(), "{needle}: the frame directory was created");
+    }
+    let frames2 = ["--frames", "2"];
+    for (scene, out, needle) in [
+        (&scene, &a_file, "lamps.mtl"),
+        (&scene, &no_parent, "no-such-dir"),
+        (&missing, &out, "missing.obj"),
+        (&dark, &out, "dark.obj"),
+    ] {
+        let mut args = vec!["relight", s(scene), "--out", s(out), "--quiet"];
+        args.extend(frames2);
+        expect_one_line_error(&run(&args), needle, 1);
+    }
+    assert!(!out.exists());
+    assert!(!no_parent.exists());
+}
+
+/// One `error:` line on stderr naming `needle`, exit code `code`, nothing on stdout.
+fn expect_one_line_error(o: &Output, needle: &str, code: i32) {
+    let err = String::from_utf8_lossy(&o.stderr);
+    let errors: Vec<&str> = err.lines().filter(|l| !l.starts_with("warning:")).collect();
+    assert_eq!(o.status.code(), Some(code), "{needle}: {err}");
+    assert_eq!(errors.len(), 1, "{needle}: {err}");
+    assert!(errors[0].starts_with("error: "), "{err}");
+    assert!(errors[0].contains(needle), "{needle}: {err}");
+    assert!(o.stdout.is_empty(), "{needle}");
+}
