@@ -197,14 +197,9 @@ impl Prepared {
             .iter()
             .map(|&p| patch_emission[p as usize])
             .collect();
-        let (mut solution, state) = self.solve_with_source(patches, &source, warm, progress);
-        // Patches the tree does not hold (inactive) keep their emission.
-        for p in 0..patches.len() {
-            if !patches.active[p] {
-                solution.patch_radiance[p] = patch_emission[p];
-            }
-        }
-        (solution, state)
+        // Patches the tree does not hold (inactive: zero area, duplicates) are settled by
+        // `Solution::from_normalized` from their own emission or their twin.
+        self.solve_with_source(patches, &source, warm, progress)
     }
 
     /// Solves `B_e = source_e + rho_e H_e(B)` for a per-element source radiance (normalized
@@ -327,7 +322,7 @@ impl Prepared {
                             }
                             let w = v / d2.sqrt();
                             let cos = -n_e.dot(w);
-                            let g = 1.0 / d2;
+                            let g = 1.0 / (d2 + l.spread as f64);
                             if cos > 0.0 {
                                 let k = cos * g * inv_pi;
                                 for c in 0..3 {

@@ -51,6 +51,10 @@ pub struct ClusterLink {
     pub origin: [f32; 3],
     /// Direction bin of `w`.
     pub bin: u16,
+    /// The sender's spread, `min(area / pi, radius^2)`: receivers use the disk kernel
+    /// `1 / (d^2 + spread)` instead of the point kernel `1 / d^2`, which overestimates the
+    /// exchange with a near, extended sender (form factors of a closed room summing above 1).
+    pub spread: f32,
 }
 
 /// The refined links, grouped by receiver.
@@ -195,6 +199,7 @@ pub fn refine(
                     receiver: r,
                     w: [w.x as f32, w.y as f32, w.z as f32],
                     origin: sn.centroid.as_vec3().to_array(),
+                    spread: (sn.area / std::f64::consts::PI).min(sn.radius * sn.radius) as f32,
                     bin: bins.bin_of(w) as u16,
                 });
                 continue;
