@@ -154,6 +154,9 @@ pub struct Convergence {
     ratios: Vec<f64>,
     /// Sweeps since the last extrapolation.
     since_extrapolation: usize,
+    /// The contraction ratio at the last extrapolation: the error estimate of the sweep right
+    /// after a jump uses it (that sweep's own ratio measures the jump, not the iteration).
+    q_at_jump: Option<f64>,
     /// Last residual seen.
     pub residual: f64,
     /// Last estimate of the remaining relative error.
@@ -166,7 +169,7 @@ impl Convergence {
         self.residual = residual;
         let q = match self.previous {
             Some(p) if p > 0.0 => (residual / p).min(0.9999),
-            _ => 0.9,
+            _ => self.q_at_jump.unwrap_or(0.9),
         };
         if self.previous.is_some() {
             self.ratios.push(q);
@@ -194,7 +197,7 @@ impl Convergence {
     /// The factor `q / (1 - q)` by which to extrapolate the last sweep's change (`x += k (x_k -
     /// x_(k-1))`, the geometric tail of a linear iteration contracting by `q`), when the
     /// contraction ratio has settled: the last three ratios agree within 2% and lie in (0.05,
-    /// 0.995), and three sweeps have passed since the last extrapolation. `None` otherwise.
+    /// 0.9999), and three sweeps have passed since the last extrapolation. `None` otherwise.
     ///
     /// The tail of a Jacobi iteration is dominated by one slowly decaying mode (for a closed
     /// room, the overall light level), so one extrapolation removes most of what many sweeps
@@ -206,12 +209,13 @@ impl Convergence {
         let last = &self.ratios[self.ratios.len() - 3..];
         let q = last[2];
         let settled = last.iter().all(|r| (r - q).abs() <= 0.02 * q);
-        if !(settled && q > 0.05 && q < 0.995) {
+        if !(settled && q > 0.05 && q < 0.9999) {
             return None;
         }
         self.since_extrapolation = 0;
         // The change right after a jump is not a contraction ratio of the plain iteration.
         self.previous = None;
+        self.q_at_jump = Some(q);
         self.ratios.clear();
         Some(q / (1.0 - q))
     }

@@ -598,6 +598,18 @@ fn albedo_0999_converges_or_says_it_stopped() {
     let patches = build_patches(&scene, None);
     let capped = SolverOptions::default();
     for (name, sol) in solve_both(&scene, &capped) {
+        if name == "hierarchical" {
+            // The hierarchical solver extrapolates over the geometric tail once the contraction
+            // ratio settles, so it converges well inside the cap.
+            let b = sol.triangle_radiance[0][0];
+            eprintln!(
+                "albedo 0.999: {name}: converged {} after {} sweeps ({} extrapolations), B = {b:.3}",
+                sol.stats.converged, sol.stats.iterations, sol.stats.extrapolations
+            );
+            assert!(sol.stats.converged, "{name}: {:?}", sol.stats);
+            assert!(rel(b, 1000.0) < 0.005, "{name}: B = {b}");
+            continue;
+        }
         assert!(
             !sol.stats.converged,
             "{name}: cannot converge in {} sweeps",
@@ -889,9 +901,12 @@ fn iteration_cap_warning_on_the_command_line() {
     let dir = tempfile::tempdir().unwrap();
     let obj = write_scene(dir.path(), &scenes::furnace_box(1.0, 0.999));
     let (csv, report) = (dir.path().join("t.csv"), dir.path().join("r.json"));
+    // The dense solver has no extrapolation: plain Jacobi sweeps hit the cap.
     let o = run(&[
         "solve",
         s(&obj),
+        "--solver",
+        "dense",
         "--quiet",
         "--triangles",
         s(&csv),
@@ -901,7 +916,7 @@ fn iteration_cap_warning_on_the_command_line() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
     assert!(
-        err.starts_with("warning: the hierarchical solver stopped at the iteration cap (500 iterations) without converging: last residual "),
+        err.starts_with("warning: the dense solver stopped at the iteration cap (500 iterations) without converging: last residual "),
         "{err}"
     );
     assert!(err.contains("raise --max-iterations"), "{err}");
