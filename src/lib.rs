@@ -10,6 +10,7 @@
 
 pub mod bins;
 pub mod dense;
+pub mod direct;
 pub mod driver;
 pub mod error;
 pub mod geometry;
