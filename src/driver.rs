@@ -888,7 +888,7 @@ pub struct CompareRun {
 
 /// Runs `f` and measures its time and peak memory above the resident memory before it.
 /// `overall_peak` keeps the process's peak across the resets this needs.
-fn measured<T>(overall_peak: &mut Option<u64>, f: impl FnOnce() -> T) -> (T, f64, Option<u64>) {
+pub fn measured<T>(overall_peak: &mut Option<u64>, f: impl FnOnce() -> T) -> (T, f64, Option<u64>) {
     *overall_peak = (*overall_peak).max(memory::peak_rss_bytes());
     let reset = memory::reset_peak_rss();
     let base = memory::current_rss_bytes();
