@@ -12,17 +12,20 @@
 //! indirect light, which is smoother and dimmer), and `E` is added back at the end.
 //!
 //! `D_e / rho_e`, the mean over the element of `(1/pi) * integral E cos cos V / r^2`, is computed
-//! as **unoccluded minus blocked**:
+//! as **unoccluded x visible fraction**:
 //!
-//! - the unoccluded part `sum_s E_s F(e <- s)` is analytic (Lambert's point-to-triangle form
+//! - the unoccluded part `U = sum_s E_s F(e <- s)` is analytic (Lambert's point-to-triangle form
 //!   factor, the emitter clipped to the receiver's front half-space, integrated over the element
-//!   with 1..6 x 6 points chosen by separation, as the solvers' couplings do): exact wherever
-//!   nothing blocks the emitters;
-//! - the blocked part is a Monte Carlo estimate from shadow rays: stratified points on the
-//!   element, emitters chosen by power (area x largest emission channel) with stratified choices,
-//!   stratified points on the chosen emitter; a sample contributes only when the shadow ray is
-//!   blocked. Noise is therefore confined to penumbrae and umbrae, and fully visible elements
-//!   get the exact value.
+//!   with 1..6 x 6 points chosen by separation, as the solvers' couplings do);
+//! - the visible fraction comes from shadow rays: stratified points on the element, emitters
+//!   chosen by power (area x largest emission channel) with stratified choices, stratified points
+//!   on the chosen emitter; each sample's unoccluded contribution `f_i` is weighed by its
+//!   visibility `V_i`, and the fraction is `sum f_i V_i / sum f_i` (a ratio estimator, per RGB
+//!   channel: its bias falls as 1/samples).
+//!
+//! Fully lit elements get exactly `U`, elements in umbra exactly 0; noise is confined to
+//! penumbrae. (Subtracting a Monte Carlo estimate of the blocked light from `U` instead, an
+//! unbiased control variate, leaves noise of either sign in umbrae.)
 //!
 //! Sampling is seeded per element (the element's index), so results are reproducible and do not
 //! depend on thread scheduling. Shadow rays use the watertight test of [`crate::raytrace`].
@@ -194,11 +197,11 @@ impl<'a> DirectLight<'a> {
                 if unoccluded.iter().all(|&x| x <= 0.0) {
                     return [0.0; 3];
                 }
-                let blocked = self.blocked(r, index as u64);
+                let visible = self.visible_fraction(r, index as u64);
                 [0, 1, 2].map(|c| {
-                    let d = rho[c] * (unoccluded[c] - blocked[c]).max(0.0);
+                    let d = rho[c] * unoccluded[c] * visible[c];
                     if d.is_finite() {
-                        d
+                        d.max(0.0)
                     } else {
                         0.0
                     }
@@ -255,13 +258,14 @@ impl<'a> DirectLight<'a> {
         sum
     }
 
-    /// Monte Carlo estimate of the part of [`Self::unoccluded`] that shadow rays find blocked.
+    /// The fraction of the receiver's unoccluded direct light that shadow rays find visible,
+    /// per RGB channel, in [0, 1] (1 when no sample carries light: nothing to weigh).
     ///
     /// Sample i pairs the receiver point of stratum i (k x k jittered grid on the triangle) with
     /// a stratified choice of emitter (1-D strata over the power distribution) and a stratified
     /// point on it (k x k grid), both strata drawn through random permutations so the pairing
     /// stays unbiased.
-    fn blocked(&self, r: &Element, index: u64) -> [f64; 3] {
+    fn visible_fraction(&self, r: &Element, index: u64) -> [f64; 3] {
         let n = self.samples;
         let k = n.isqrt();
         let inv_k = 1.0 / k as f64;
@@ -275,7 +279,8 @@ impl<'a> DirectLight<'a> {
                 perm.swap(a, b);
             }
         }
-        let mut sum = [0.0f64; 3];
+        let mut arriving = [0.0f64; 3];
+        let mut visible = [0.0f64; 3];
         for i in 0..n {
             // 1. A point on the receiver (stratum i).
             let x = point_on_triangle(
@@ -293,7 +298,7 @@ impl<'a> DirectLight<'a> {
                 (((cell % k) as f64 + rng.next_f64()) * inv_k).min(1.0),
                 (((cell / k) as f64 + rng.next_f64()) * inv_k).min(1.0),
             );
-            // 3. Only light that would arrive (both fronts facing) and is blocked counts.
+            // 3. Light that would arrive (both fronts facing), and whether it does.
             let to_light = y - x;
             let dist2 = to_light.length_squared();
             if !(dist2 > 0.0 && dist2.is_finite()) {
@@ -306,23 +311,29 @@ impl<'a> DirectLight<'a> {
             if !(cos_x > 0.0 && cos_s > 0.0) {
                 continue;
             }
-            let emitter_patch = self.emitters.patch[k_s] as usize;
-            if self
-                .rays
-                .visible(x, w_in, dist, r.patch as usize, emitter_patch)
-            {
-                continue;
-            }
             let g = cos_x * cos_s / (PI * dist2) * s.area / self.emitters.probability[k_s];
             if !g.is_finite() {
                 continue;
             }
+            let emitter_patch = self.emitters.patch[k_s] as usize;
+            let seen = self
+                .rays
+                .visible(x, w_in, dist, r.patch as usize, emitter_patch);
             let e = self.emitters.emission[k_s];
             for c in 0..3 {
-                sum[c] += e[c] * g;
+                arriving[c] += e[c] * g;
+                if seen {
+                    visible[c] += e[c] * g;
+                }
             }
         }
-        sum.map(|x| x * inv_n)
+        [0, 1, 2].map(|c| {
+            if arriving[c] > 0.0 {
+                (visible[c] / arriving[c]).clamp(0.0, 1.0)
+            } else {
+                1.0
+            }
+        })
     }
 }
 
