@@ -59,6 +59,7 @@ pub struct SweepArgs {
         long,
         value_name = "LIST",
         default_value = "0.125,0.25,0.5,1",
+        allow_hyphen_values = true,
         help_heading = "Sweep options"
     )]
     pub epsilon: String,
@@ -66,6 +67,7 @@ pub struct SweepArgs {
     #[arg(
         long,
         value_name = "LIST",
+        allow_hyphen_values = true,
         default_value = "6,8,12",
         help_heading = "Sweep options"
     )]
@@ -74,6 +76,7 @@ pub struct SweepArgs {
     #[arg(
         long,
         value_name = "LIST",
+        allow_hyphen_values = true,
         default_value = "preset",
         help_heading = "Sweep options"
     )]
@@ -82,6 +85,7 @@ pub struct SweepArgs {
     #[arg(
         long,
         value_name = "LIST",
+        allow_hyphen_values = true,
         default_value = "preset",
         help_heading = "Sweep options"
     )]
