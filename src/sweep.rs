@@ -17,7 +17,7 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use clap::Args;
+use clap::{Args, ValueEnum};
 use plotters::prelude::*;
 
 use crate::driver::{self, Loaded, Preset, SceneArgs, SolverKind, Timings};
@@ -29,10 +29,31 @@ use crate::solve::SolverOptions;
 
 /// The exact header line of the sweep CSV (without the line break).
 pub const CSV_HEADER: &str = "run,preset,solver,epsilon,bins,tol,max_iterations,direct_light,\
-seconds,iterations,converged,residual,links,peak_memory_delta_bytes,negative_fraction,error,pareto";
+seconds,cpu_seconds,iterations,converged,residual,links,peak_memory_delta_bytes,negative_fraction,\
+error,pareto";
 
 /// Most runs one sweep may have (a guard against a grid that would run for days).
 pub const MAX_RUNS: usize = 1000;
+
+/// Which time the Pareto front and the plot use.
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TimeAxis {
+    /// Wall-clock seconds of each solve.
+    Wall,
+    /// CPU seconds of each solve, all threads (Linux): steadier than wall-clock time on a
+    /// machine shared with other jobs.
+    Cpu,
+}
+
+impl TimeAxis {
+    /// The axis title of the plot.
+    fn title(self) -> &'static str {
+        match self {
+            TimeAxis::Wall => "solve time (wall-clock s, log scale)",
+            TimeAxis::Cpu => "solve time (CPU s, all threads, log scale)",
+        }
+    }
+}
 
 /// `antiradiance sweep`: runs the solver over a grid of knob values and measures each run's
 /// time and error against the path tracer.
@@ -129,8 +150,8 @@ pub struct SweepArgs {
     /// Plot of error against solve time with the Pareto front.
     #[arg(long, value_name = "OUT.svg", help_heading = "Output options")]
     pub svg: Option<PathBuf>,
-    /// Solve each grid point N times and keep the shortest time (timings on a busy machine are
-    /// noisy; the results of the repeats are identical).
+    /// Run the whole grid N times, round by round, and keep each run's shortest time (timings
+    /// on a busy machine are noisy; the results of the repeats are identical).
     #[arg(
         long,
         value_name = "N",
@@ -138,6 +159,9 @@ pub struct SweepArgs {
         help_heading = "Sweep options"
     )]
     pub repeat: usize,
+    /// Time used for the Pareto front and the plot (both are in the CSV).
+    #[arg(long, value_enum, default_value_t = TimeAxis::Wall, help_heading = "Sweep options")]
+    pub time_axis: TimeAxis,
     /// No progress bars and no per-run lines (the table is still printed).
     #[arg(long, short)]
     pub quiet: bool,
@@ -324,6 +348,11 @@ impl SweepArgs {
             }
             _ => {}
         }
+        if self.time_axis == TimeAxis::Cpu && process_cpu_seconds().is_none() {
+            return Err(Error::Parameter(
+                "--time-axis cpu needs /proc/self/stat (Linux); use --time-axis wall".into(),
+            ));
+        }
         if !(1..=100).contains(&self.repeat) {
             return Err(Error::Parameter(format!(
                 "--repeat {} outside 1..=100",
@@ -371,8 +400,10 @@ pub struct RunResult {
     /// What was run.
     pub spec: RunSpec,
     /// Wall-clock seconds of the solve (tree, links, direct light and iterations; not loading),
-    /// the shortest of the `--repeat` solves.
+    /// the shortest of the `--repeat` rounds.
     pub seconds: f64,
+    /// CPU seconds of the solve, all threads (Linux only), the shortest of the rounds.
+    pub cpu_seconds: Option<f64>,
     /// Iterations performed.
     pub iterations: usize,
     /// True when the tolerance was met before the iteration cap.
@@ -381,7 +412,9 @@ pub struct RunResult {
     pub residual: f64,
     /// Transport links.
     pub links: u64,
-    /// Peak resident memory during the solve above the memory before it, bytes (Linux only).
+    /// Peak resident memory during the solve above the memory before it, bytes (Linux only;
+    /// the largest of the `--repeat` rounds). Memory the allocator kept from an earlier run
+    /// is not counted again, so small runs may show 0.
     pub peak_memory_delta_bytes: Option<u64>,
     /// Negative radiance mass relative to the positive mass (before clamping).
     pub negative_fraction: f64,
@@ -389,6 +422,30 @@ pub struct RunResult {
     pub error: f64,
     /// True when no other run is at least as fast and as accurate and better in one of them.
     pub pareto: bool,
+}
+
+impl RunResult {
+    /// The run's time on the chosen axis (NaN when CPU time is unknown).
+    pub fn time(&self, axis: TimeAxis) -> f64 {
+        match axis {
+            TimeAxis::Wall => self.seconds,
+            TimeAxis::Cpu => self.cpu_seconds.unwrap_or(f64::NAN),
+        }
+    }
+}
+
+/// CPU time (user + system, all threads) this process has used so far, in seconds, from
+/// `/proc/self/stat` (fields 14 and 15, in clock ticks of 1/100 s: Linux's `USER_HZ` on every
+/// common architecture). `None` off Linux or when the file cannot be read. Resolution 10 ms.
+pub fn process_cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // The command name (field 2) is in parentheses and may hold spaces: split after it.
+    let rest = &stat[stat.rfind(')')? + 1..];
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    // `fields[0]` is field 3 (state), so field n is `fields[n - 3]`.
+    let utime: u64 = fields.get(11)?.parse().ok()?;
+    let stime: u64 = fields.get(12)?.parse().ok()?;
+    Some((utime + stime) as f64 / 100.0)
 }
 
 /// For points (seconds, error), true where no other point is at least as good in both and
@@ -461,51 +518,68 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
         .map(|t| loaded.scene.is_emitter(t))
         .collect();
 
-    // 3. Run the grid, one solve at a time (each solve uses every core).
+    // 3. Run the grid, one solve at a time (each solve uses every core). With --repeat, the
+    //    whole grid runs again round by round, so that a burst of load from other jobs hits
+    //    every run alike; each run keeps its shortest time and its largest memory figure.
     let mut overall_peak = None;
     let total = runs.len();
     let mut results: Vec<RunResult> = Vec::with_capacity(total);
-    for (i, spec) in runs.into_iter().enumerate() {
-        let (solution, mut seconds, delta) = driver::measured(&mut overall_peak, || {
-            driver::run_solver(args.solver, &loaded.patches, &spec.options, args.quiet)
-        });
-        for _ in 1..args.repeat {
-            let (_, again, _) = driver::measured(&mut overall_peak, || {
+    for round in 0..args.repeat {
+        for (i, spec) in runs.iter().enumerate() {
+            let cpu_before = process_cpu_seconds();
+            let (solution, seconds, delta) = driver::measured(&mut overall_peak, || {
                 driver::run_solver(args.solver, &loaded.patches, &spec.options, args.quiet)
             });
-            seconds = seconds.min(again);
-        }
-        let error = relative_error(&areas, &emissive, &solution.triangle_radiance, &truth);
-        let s = &solution.stats;
-        let result = RunResult {
-            spec,
-            seconds,
-            iterations: s.iterations,
-            converged: s.converged,
-            residual: s.residual,
-            links: s.links,
-            peak_memory_delta_bytes: delta,
-            negative_fraction: s.negative_fraction,
-            error,
-            pareto: false,
-        };
-        if !args.quiet {
-            eprintln!(
-                "run {}/{}: {} -> {:.3} s, {} iterations, error {:.3}%",
-                i + 1,
-                total,
-                describe(&result.spec, args.solver),
+            let cpu_seconds = match (cpu_before, process_cpu_seconds()) {
+                (Some(a), Some(b)) => Some((b - a).max(0.0)),
+                _ => None,
+            };
+            if round > 0 {
+                let r = &mut results[i];
+                r.seconds = r.seconds.min(seconds);
+                r.cpu_seconds = match (r.cpu_seconds, cpu_seconds) {
+                    (Some(a), Some(b)) => Some(a.min(b)),
+                    (a, b) => a.or(b),
+                };
+                r.peak_memory_delta_bytes = r.peak_memory_delta_bytes.max(delta);
+                continue;
+            }
+            let error = relative_error(&areas, &emissive, &solution.triangle_radiance, &truth);
+            let s = &solution.stats;
+            let result = RunResult {
+                spec: spec.clone(),
                 seconds,
-                result.iterations,
-                100.0 * error
-            );
+                cpu_seconds,
+                iterations: s.iterations,
+                converged: s.converged,
+                residual: s.residual,
+                links: s.links,
+                peak_memory_delta_bytes: delta,
+                negative_fraction: s.negative_fraction,
+                error,
+                pareto: false,
+            };
+            if !args.quiet {
+                eprintln!(
+                    "run {}/{}: {} -> {:.3} s ({} CPU s), {} iterations, error {:.3}%",
+                    i + 1,
+                    total,
+                    describe(&result.spec, args.solver),
+                    seconds,
+                    cpu_seconds
+                        .map(|c| format!("{c:.2}"))
+                        .unwrap_or_else(|| "n/a".into()),
+                    result.iterations,
+                    100.0 * error
+                );
+            }
+            results.push(result);
         }
-        results.push(result);
     }
     let front = pareto_front(
         &results
             .iter()
-            .map(|r| (r.seconds, r.error))
+            .map(|r| (r.time(args.time_axis), r.error))
             .collect::<Vec<_>>(),
     );
     for (r, on_front) in results.iter_mut().zip(front) {
@@ -515,16 +589,23 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
     // 4. Outputs: CSV, plot, table.
     write_csv(&args.csv, args.solver, &results)?;
     if let Some(path) = &args.svg {
+        let mut scene_label = args
+            .scene
+            .scene
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        if let Some(y) = args.scene.emit_above {
+            scene_label += &format!(" --emit-above {y}");
+        }
+        if let Some(l) = args.scene.max_edge {
+            scene_label += &format!(" --max-edge {l}");
+        }
         let title = format!(
-            "{}: error vs solve time ({} solver)",
-            args.scene
-                .scene
-                .file_name()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_default(),
+            "{scene_label}: error vs solve time ({} solver)",
             args.solver.name()
         );
-        write_svg(path, &title, args.solver, &results)?;
+        write_svg(path, &title, args.solver, args.time_axis, &results)?;
     }
     let mut stdout = std::io::stdout().lock();
     // A closed pipe (`| head`) is not an error worth a message.
@@ -599,7 +680,7 @@ fn write_csv(path: &Path, solver: SolverKind, results: &[RunResult]) -> Result<(
             let o = &r.spec.options;
             writeln!(
                 w,
-                "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+                "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
                 i + 1,
                 r.spec.preset.name(),
                 solver.name(),
@@ -613,6 +694,7 @@ fn write_csv(path: &Path, solver: SolverKind, results: &[RunResult]) -> Result<(
                 o.max_iterations,
                 u8::from(o.direct_light),
                 format_f64(r.seconds),
+                r.cpu_seconds.map(|c| format!("{c:.2}")).unwrap_or_default(),
                 r.iterations,
                 u8::from(r.converged),
                 format_f64(r.residual),
@@ -632,7 +714,7 @@ fn write_csv(path: &Path, solver: SolverKind, results: &[RunResult]) -> Result<(
 /// The table printed on stdout.
 fn table(solver: SolverKind, results: &[RunResult]) -> String {
     let mut out = format!(
-        "{:>4} {:<9} {:>8} {:>5} {:>8} {:>6} {:>7} {:>10} {:>6} {:>12} {:>10} {:>9}\n",
+        "{:>4} {:<9} {:>8} {:>5} {:>8} {:>6} {:>7} {:>10} {:>8} {:>6} {:>12} {:>10} {:>9}\n",
         "run",
         "preset",
         "epsilon",
@@ -641,6 +723,7 @@ fn table(solver: SolverKind, results: &[RunResult]) -> String {
         "cap",
         "direct",
         "time (s)",
+        "cpu (s)",
         "iter",
         "links",
         "peak mem",
@@ -649,7 +732,7 @@ fn table(solver: SolverKind, results: &[RunResult]) -> String {
     for (i, r) in results.iter().enumerate() {
         let o = &r.spec.options;
         out += &format!(
-            "{:>4} {:<9} {:>8} {:>5} {:>8.1e} {:>6} {:>7} {:>10.3} {:>6} {:>12} {:>10} {:>8.3}%{}\n",
+            "{:>4} {:<9} {:>8} {:>5} {:>8.1e} {:>6} {:>7} {:>10.3} {:>8} {:>6} {:>12} {:>10} {:>8.3}%{}\n",
             i + 1,
             r.spec.preset.name(),
             if solver == SolverKind::Hierarchical {
@@ -662,6 +745,9 @@ fn table(solver: SolverKind, results: &[RunResult]) -> String {
             o.max_iterations,
             if o.direct_light { "on" } else { "off" },
             r.seconds,
+            r.cpu_seconds
+                .map(|c| format!("{c:.2}"))
+                .unwrap_or_else(|| "n/a".into()),
             if r.converged {
                 r.iterations.to_string()
             } else {
@@ -675,7 +761,8 @@ fn table(solver: SolverKind, results: &[RunResult]) -> String {
             if r.pareto { "  *" } else { "" }
         );
     }
-    out += "* = on the Pareto front (no other run is both faster and more accurate); ! = stopped at the iteration cap\n";
+    out += "* = on the Pareto front (no other run is both faster and more accurate on the chosen \
+            time axis); ! = stopped at the iteration cap\n";
     out
 }
 
@@ -683,13 +770,25 @@ fn table(solver: SolverKind, results: &[RunResult]) -> String {
 fn plot(
     title: &str,
     solver: SolverKind,
+    axis: TimeAxis,
     results: &[RunResult],
 ) -> std::result::Result<String, String> {
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (960, 640)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| e.to_string())?;
-        let times: Vec<f64> = results.iter().map(|r| r.seconds.max(1e-4)).collect();
+        // Runs without a time on this axis (CPU time unavailable) sit at the left edge.
+        let times: Vec<f64> = results
+            .iter()
+            .map(|r| {
+                let t = r.time(axis);
+                if t.is_finite() {
+                    t.max(1e-3)
+                } else {
+                    1e-3
+                }
+            })
+            .collect();
         let errors: Vec<f64> = results.iter().map(|r| 100.0 * r.error).collect();
         let t_lo = times.iter().copied().fold(f64::INFINITY, f64::min) / 1.4;
         let t_hi = times.iter().copied().fold(0.0, f64::max) * 1.4;
@@ -703,7 +802,7 @@ fn plot(
             .map_err(|e| e.to_string())?;
         chart
             .configure_mesh()
-            .x_desc("solve time (s, log scale; shared, busy machine)")
+            .x_desc(axis.title())
             .y_desc("error vs path tracer (%)")
             .label_style(("sans-serif", 14))
             .x_label_formatter(&|x| short_number(*x))
@@ -761,30 +860,44 @@ fn plot(
         let mut taken: Vec<(i32, i32, i32, i32)> = Vec::new();
         for i in order {
             let on_front = results[i].pareto;
-            let (text, size) = if on_front {
-                (format!("{} {}", i + 1, names[i]), 13)
-            } else {
-                ((i + 1).to_string(), 11)
-            };
             let (px, py) = chart.backend_coord(&(times[i], errors[i]));
-            let width = (0.62 * size as f64 * text.chars().count() as f64).ceil() as i32;
-            let height = size + 2;
-            let places = [
-                (7, -height - 2),
-                (7, 3),
-                (-7 - width, -height - 2),
-                (-7 - width, 3),
-            ];
-            let free = places.iter().copied().find(|&(dx, dy)| {
-                let (x0, y0) = (px + dx, py + dy);
-                !taken.iter().any(|&(a0, b0, a1, b1)| {
-                    x0 < a1 && a0 < x0 + width && y0 < b1 && b0 < y0 + height
-                })
-            });
-            let (dx, dy) = match (free, on_front) {
-                (Some(place), _) => place,
-                (None, true) => places[0],
-                (None, false) => continue,
+            // Candidates: the full label (front only), then the run number alone.
+            let mut candidates = Vec::new();
+            if on_front {
+                candidates.push((format!("{} {}", i + 1, names[i]), 13));
+            }
+            candidates.push(((i + 1).to_string(), if on_front { 13 } else { 11 }));
+            let fits = |text: &str, size: i32| {
+                let width = (0.62 * size as f64 * text.chars().count() as f64).ceil() as i32;
+                let height = size + 2;
+                let places = [
+                    (7, -height - 2),
+                    (7, 3),
+                    (-7 - width, -height - 2),
+                    (-7 - width, 3),
+                ];
+                places
+                    .into_iter()
+                    .find(|&(dx, dy)| {
+                        let (x0, y0) = (px + dx, py + dy);
+                        !taken.iter().any(|&(a0, b0, a1, b1)| {
+                            x0 < a1 && a0 < x0 + width && y0 < b1 && b0 < y0 + height
+                        })
+                    })
+                    .map(|(dx, dy)| (dx, dy, width, height))
+            };
+            let placed = candidates
+                .iter()
+                .find_map(|(text, size)| fits(text, *size).map(|p| (text.clone(), *size, p)));
+            let (text, size, (dx, dy, width, height)) = match placed {
+                Some(p) => p,
+                // A front point always gets its number, even over another label.
+                None if on_front => {
+                    let text = (i + 1).to_string();
+                    let width = (0.62 * 13.0 * text.len() as f64).ceil() as i32;
+                    (text, 13, (7, -17, width, 15))
+                }
+                None => continue,
             };
             taken.push((px + dx, py + dy, px + dx + width, py + dy + height));
             let colour = if on_front {
@@ -826,8 +939,14 @@ fn short_number(x: f64) -> String {
 }
 
 /// Writes the plot (atomically).
-fn write_svg(path: &Path, title: &str, solver: SolverKind, results: &[RunResult]) -> Result<()> {
-    let svg = plot(title, solver, results).map_err(|e| Error::Io {
+fn write_svg(
+    path: &Path,
+    title: &str,
+    solver: SolverKind,
+    axis: TimeAxis,
+    results: &[RunResult],
+) -> Result<()> {
+    let svg = plot(title, solver, axis, results).map_err(|e| Error::Io {
         path: path.to_path_buf(),
         message: format!("cannot draw the plot: {}", driver::one_line(&e)),
     })?;
