@@ -79,7 +79,7 @@ pub struct SweepArgs {
     #[arg(
         long,
         value_name = "LIST",
-        default_value = "0.125,0.25,0.5,1",
+        default_value = "0.25,0.5,1,2",
         allow_hyphen_values = true,
         help_heading = "Sweep options"
     )]
