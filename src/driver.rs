@@ -32,7 +32,7 @@ use crate::render::{self, CameraOptions, Shading};
 use crate::scene::{self, Scene, SceneOptions};
 use crate::solution::{self, Solution, SolveStats};
 use crate::solve::SolverOptions;
-use crate::{dense, geometry, hierarchical, memory, output};
+use crate::{dense, direct, geometry, hierarchical, memory, output};
 
 /// Largest number of patches `--max-edge` may split a scene into (a guard against a typo such
 /// as a length in the wrong unit, which would otherwise exhaust memory before any message; a
@@ -185,6 +185,10 @@ pub struct SolverArgs {
     /// either way).
     #[arg(long)]
     pub keep_negative: bool,
+    /// Exact direct light: the first bounce from the emitters with shadow rays, antiradiance
+    /// for the indirect bounces only.
+    #[arg(long)]
+    pub direct_light: bool,
 }
 
 impl SolverArgs {
@@ -209,6 +213,7 @@ impl SolverArgs {
         options.two_sided = self.two_sided_antiradiance;
         options.antiradiance = !self.no_antiradiance;
         options.clamp_negative = !self.keep_negative;
+        options.direct_light = self.direct_light;
         options.validate()?;
         Ok(options)
     }
@@ -551,9 +556,15 @@ pub fn run_solver(
     quiet: bool,
 ) -> Solution {
     let progress = Progress::new(kind.name(), options.max_iterations as u64, !quiet);
-    let mut solution = match kind {
-        SolverKind::Dense => dense::solve_dense(patches, options, &progress),
-        SolverKind::Hierarchical => hierarchical::solve_hierarchical(patches, options, &progress),
+    let mut solution = match (kind, options.direct_light) {
+        (SolverKind::Dense, false) => dense::solve_dense(patches, options, &progress),
+        (SolverKind::Hierarchical, false) => {
+            hierarchical::solve_hierarchical(patches, options, &progress)
+        }
+        (SolverKind::Dense, true) => direct::solve_dense_direct(patches, options, &progress),
+        (SolverKind::Hierarchical, true) => {
+            direct::solve_hierarchical_direct(patches, options, &progress)
+        }
     };
     progress.finish();
     // Degenerate and duplicate triangles' patches get the values the model fixes for them,
@@ -877,7 +888,7 @@ pub struct CompareRun {
 
 /// Runs `f` and measures its time and peak memory above the resident memory before it.
 /// `overall_peak` keeps the process's peak across the resets this needs.
-fn measured<T>(overall_peak: &mut Option<u64>, f: impl FnOnce() -> T) -> (T, f64, Option<u64>) {
+pub fn measured<T>(overall_peak: &mut Option<u64>, f: impl FnOnce() -> T) -> (T, f64, Option<u64>) {
     *overall_peak = (*overall_peak).max(memory::peak_rss_bytes());
     let reset = memory::reset_peak_rss();
     let base = memory::current_rss_bytes();

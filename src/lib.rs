@@ -10,6 +10,7 @@
 
 pub mod bins;
 pub mod dense;
+pub mod direct;
 pub mod driver;
 pub mod error;
 pub mod geometry;
@@ -20,13 +21,16 @@ pub mod memory;
 pub mod mesh;
 pub mod output;
 pub mod progress;
+pub mod raytrace;
 pub mod reference;
 pub mod relight;
 pub mod render;
+pub mod sampling;
 pub mod scene;
 pub mod scenes;
 pub mod solution;
 pub mod solve;
+pub mod sweep;
 pub mod transport;
 
 pub use error::{Error, Result};

@@ -26,6 +26,8 @@ enum Command {
     Compare(driver::CompareArgs),
     /// Animate the lights of a scene: build links once, relight every frame, write PNG frames.
     Relight(antiradiance::relight::RelightArgs),
+    /// Measure time and error against the path tracer over a grid of solver knobs.
+    Sweep(antiradiance::sweep::SweepArgs),
 }
 
 fn main() -> ExitCode {
@@ -39,6 +41,7 @@ fn main() -> ExitCode {
         Command::Reference(args) => driver::reference(args),
         Command::Compare(args) => driver::compare(args),
         Command::Relight(args) => antiradiance::relight::relight(args),
+        Command::Sweep(args) => antiradiance::sweep::sweep(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

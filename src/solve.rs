@@ -35,6 +35,9 @@ pub struct SolverOptions {
     /// Most times the hierarchical solver may split an input triangle in four where a near,
     /// smaller neighbour needs it finer. 0..6; 0 keeps the input mesh.
     pub split_depth: u8,
+    /// Exact direct light: the first bounce from the emitters with shadow rays, antiradiance for
+    /// the indirect bounces only (see [`crate::direct`]). Default false.
+    pub direct_light: bool,
 }
 
 impl Default for SolverOptions {
@@ -56,6 +59,7 @@ impl SolverOptions {
             near_quadrature: 6,
             epsilon: 1.0,
             split_depth: 4,
+            direct_light: false,
         }
     }
 

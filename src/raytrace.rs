@@ -1,0 +1,401 @@
+//! Visibility rays against the patches: an obvhs BVH2 over padded f32 boxes, with every
+//! ray-triangle test done by the watertight test of Woop, Benthin and Wald (2013) in f64 on the
+//! patch corners, so a ray through the shared edge or vertex of two triangles never slips
+//! between them. Shared by the reference path tracer and the exact direct light.
+//!
+//! Distances are in the unit frame of [`Patches`]; the self-intersection offset is
+//! [`RAY_EPS`] (in `geometry.rs` with every other tolerance).
+
+use glam::DVec3;
+use obvhs::aabb::Aabb;
+use obvhs::bvh2::Bvh2;
+use obvhs::ray::{Ray, RayHit};
+use obvhs::{Boundable, BvhBuildParams};
+
+use crate::geometry::{Tri, RAY_EPS};
+use crate::mesh::Patches;
+
+/// Absolute padding (unit frame) of the f32 boxes the BVH is built over, so that rounding the
+/// f64 corners and rays to f32 never culls a box that holds an f64 hit.
+const BOX_PAD: f32 = 1e-5;
+
+// ---------------------------------------------------------------------------------------------
+// Watertight ray-triangle intersection
+
+/// A ray prepared for the watertight test of Woop, Benthin and Wald (2013), in f64.
+#[derive(Clone, Copy, Debug)]
+pub struct WatertightRay {
+    org: DVec3,
+    kx: usize,
+    ky: usize,
+    kz: usize,
+    sx: f64,
+    sy: f64,
+    sz: f64,
+}
+
+/// A ray-triangle hit: distance and barycentric weights of corners 0, 1, 2.
+#[derive(Clone, Copy, Debug)]
+pub struct TriHit {
+    /// Distance along the ray, in units of the direction's length.
+    pub t: f64,
+    /// Barycentric weights of corners 0, 1, 2.
+    pub bary: [f64; 3],
+}
+
+impl WatertightRay {
+    /// Prepares the ray `org + t dir`.
+    ///
+    /// Precondition: `dir` is finite and not zero (its length is the unit of t).
+    pub fn new(org: DVec3, dir: DVec3) -> WatertightRay {
+        let abs = dir.abs();
+        let kz = if abs.x >= abs.y && abs.x >= abs.z {
+            0
+        } else if abs.y >= abs.z {
+            1
+        } else {
+            2
+        };
+        let mut kx = (kz + 1) % 3;
+        let mut ky = (kx + 1) % 3;
+        if dir[kz] < 0.0 {
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        WatertightRay {
+            org,
+            kx,
+            ky,
+            kz,
+            sx: dir[kx] / dir[kz],
+            sy: dir[ky] / dir[kz],
+            sz: 1.0 / dir[kz],
+        }
+    }
+
+    /// Hit with `t_min < t < t_max`, either side of the triangle. Points exactly on an edge or a
+    /// corner count as inside, and the edge functions of a shared edge are computed bit-identically
+    /// (up to sign) by both triangles, so no ray slips between two triangles sharing an edge.
+    pub fn intersect(&self, tri: &Tri, t_min: f64, t_max: f64) -> Option<TriHit> {
+        let (kx, ky, kz) = (self.kx, self.ky, self.kz);
+        let a = tri[0] - self.org;
+        let b = tri[1] - self.org;
+        let c = tri[2] - self.org;
+        let ax = a[kx] - self.sx * a[kz];
+        let ay = a[ky] - self.sy * a[kz];
+        let bx = b[kx] - self.sx * b[kz];
+        let by = b[ky] - self.sy * b[kz];
+        let cx = c[kx] - self.sx * c[kz];
+        let cy = c[ky] - self.sy * c[kz];
+        let u = cx * by - cy * bx;
+        let v = ax * cy - ay * cx;
+        let w = bx * ay - by * ax;
+        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+            return None;
+        }
+        let det = u + v + w;
+        if det == 0.0 || !det.is_finite() {
+            return None;
+        }
+        let az = self.sz * a[kz];
+        let bz = self.sz * b[kz];
+        let cz = self.sz * c[kz];
+        let t = (u * az + v * bz + w * cz) / det;
+        if !(t > t_min && t < t_max) {
+            return None;
+        }
+        let inv = 1.0 / det;
+        Some(TriHit {
+            t,
+            bary: [u * inv, v * inv, w * inv],
+        })
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// BVH
+
+/// A padded f32 box around one patch, for the BVH build.
+struct PaddedBox {
+    aabb: Aabb,
+}
+
+impl Boundable for PaddedBox {
+    fn aabb(&self) -> Aabb {
+        self.aabb
+    }
+}
+
+fn padded_box(tri: &Tri) -> PaddedBox {
+    let lo = tri[0].min(tri[1]).min(tri[2]).as_vec3a();
+    let hi = tri[0].max(tri[1]).max(tri[2]).as_vec3a();
+    let pad_lo = lo.abs() * 1e-6 + BOX_PAD;
+    let pad_hi = hi.abs() * 1e-6 + BOX_PAD;
+    PaddedBox {
+        aabb: Aabb {
+            min: lo - pad_lo,
+            max: hi + pad_hi,
+        },
+    }
+}
+
+/// An f32 distance bound at least as large as the f64 distance `t`, for BVH culling.
+fn conservative_f32(t: f64) -> f32 {
+    (t * (1.0 + 1e-5) + 1e-5) as f32
+}
+
+/// Closest hit of a ray: patch index, distance, point on the patch.
+#[derive(Clone, Copy, Debug)]
+pub struct Hit {
+    /// Index of the patch hit.
+    pub patch: usize,
+    /// Distance along the (unit) ray direction, unit frame.
+    pub t: f64,
+    /// The point hit, unit frame.
+    pub point: DVec3,
+}
+
+/// The active patches with a BVH over them, for closest-hit and shadow rays.
+pub struct RayScene<'a> {
+    patches: &'a Patches,
+    /// None when no patch is active.
+    bvh: Option<Bvh2>,
+    /// Patch index of each BVH primitive slot (already mapped through `primitive_indices`).
+    slot_patch: Vec<u32>,
+}
+
+impl<'a> RayScene<'a> {
+    /// Builds the BVH over the active patches of `patches` (unit frame, as
+    /// [`crate::mesh::build_patches`] makes them). Inactive (zero-area) patches never block.
+    pub fn new(patches: &'a Patches) -> RayScene<'a> {
+        let active: Vec<u32> = (0..patches.len())
+            .filter(|&p| patches.active[p])
+            .map(|p| p as u32)
+            .collect();
+        let (bvh, slot_patch) = if active.is_empty() {
+            (None, Vec::new())
+        } else {
+            let boxes: Vec<PaddedBox> = active
+                .iter()
+                .map(|&p| padded_box(&patches.corners[p as usize]))
+                .collect();
+            let mut build_time = std::time::Duration::ZERO;
+            let bvh = obvhs::bvh2::builder::build_bvh2(
+                &boxes,
+                BvhBuildParams::medium_build(),
+                &mut build_time,
+            );
+            let slot_patch = bvh
+                .primitive_indices
+                .iter()
+                .map(|&i| active[i as usize])
+                .collect();
+            (Some(bvh), slot_patch)
+        };
+        RayScene {
+            patches,
+            bvh,
+            slot_patch,
+        }
+    }
+
+    /// Closest hit along `org + t dir` (unit `dir`), `RAY_EPS < t`, ignoring patch `skip`.
+    pub fn closest(&self, org: DVec3, dir: DVec3, skip: usize) -> Option<Hit> {
+        let bvh = self.bvh.as_ref()?;
+        let wt = WatertightRay::new(org, dir);
+        let ray = Ray::new(org.as_vec3a(), dir.as_vec3a(), 0.0, f32::INFINITY);
+        let mut best: Option<(usize, TriHit)> = None;
+        let mut best_t = f64::INFINITY;
+        let mut ray_hit = RayHit::none();
+        bvh.ray_traverse(ray, &mut ray_hit, |_, slot| {
+            let patch = self.slot_patch[slot] as usize;
+            if patch == skip {
+                return f32::INFINITY;
+            }
+            match wt.intersect(&self.patches.corners[patch], RAY_EPS, best_t) {
+                Some(h) => {
+                    best_t = h.t;
+                    best = Some((patch, h));
+                    conservative_f32(h.t)
+                }
+                None => f32::INFINITY,
+            }
+        });
+        best.map(|(patch, h)| {
+            let tri = &self.patches.corners[patch];
+            Hit {
+                patch,
+                t: h.t,
+                point: tri[0] * h.bary[0] + tri[1] * h.bary[1] + tri[2] * h.bary[2],
+            }
+        })
+    }
+
+    /// True when nothing but patches `skip_a` and `skip_b` blocks `org + t dir` for
+    /// `RAY_EPS < t < dist - RAY_EPS` (unit `dir`). Back sides block too.
+    pub fn visible(&self, org: DVec3, dir: DVec3, dist: f64, skip_a: usize, skip_b: usize) -> bool {
+        let Some(bvh) = self.bvh.as_ref() else {
+            return true;
+        };
+        let t_max = dist - RAY_EPS;
+        if t_max <= RAY_EPS {
+            return true;
+        }
+        let wt = WatertightRay::new(org, dir);
+        let ray = Ray::new(org.as_vec3a(), dir.as_vec3a(), 0.0, conservative_f32(t_max));
+        bvh.ray_traverse_miss(ray, |_, slot| {
+            let patch = self.slot_patch[slot] as usize;
+            if patch == skip_a || patch == skip_b {
+                return f32::INFINITY;
+            }
+            if wt
+                .intersect(&self.patches.corners[patch], RAY_EPS, t_max)
+                .is_some()
+            {
+                0.0
+            } else {
+                f32::INFINITY
+            }
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::f64::consts::PI;
+
+    use super::*;
+    use crate::mesh::build_patches;
+    use crate::sampling::Rng;
+    use crate::scene::Scene;
+
+    /// A fan of `m` triangles around `center` in a tilted plane, counter-clockwise.
+    fn fan(m: usize) -> (Vec<Tri>, DVec3, Vec<DVec3>) {
+        let center = DVec3::new(0.013, -0.027, 0.031);
+        let u = DVec3::new(0.8, 0.35, -0.2).normalize();
+        let v = u.cross(DVec3::new(0.1, 0.3, 0.9)).normalize();
+        let rim: Vec<DVec3> = (0..m)
+            .map(|i| {
+                // Irregular angles and radii so no edge is axis-aligned.
+                let a = 2.0 * PI * (i as f64 + 0.3 * ((i * 7 % 5) as f64 / 5.0)) / m as f64;
+                let r = 0.3 + 0.1 * ((i * 3 % 4) as f64 / 4.0);
+                center + u * (r * a.cos()) + v * (r * a.sin())
+            })
+            .collect();
+        let tris = (0..m).map(|i| [center, rim[i], rim[(i + 1) % m]]).collect();
+        (tris, center, rim)
+    }
+
+    fn fan_patches(tris: &[Tri]) -> Patches {
+        let n = tris.len();
+        let scene = Scene::from_triangles(tris, &vec![[0.5; 3]; n], &vec![[0.0; 3]; n]);
+        build_patches(&scene, None)
+    }
+
+    #[test]
+    fn watertight_fan_edges_and_vertices_never_missed() {
+        let m = 9;
+        let (tris, center, rim) = fan(m);
+        let patches = fan_patches(&tris);
+        let scene = RayScene::new(&patches);
+        // The fan in the unit frame (build_patches moved and scaled it).
+        let frame = patches.frame;
+        let c = frame.unit_from_world(center);
+        let rim: Vec<DVec3> = rim.iter().map(|&p| frame.unit_from_world(p)).collect();
+        let n = patches.normal[0];
+        let mut rng = Rng::new(7, 0);
+        let mut rays = 0;
+        let mut f32_misses = 0;
+        for trial in 0..400 {
+            // Targets: the centre vertex (shared by all m triangles) and points on the m shared
+            // spokes. (Rim vertices lie on the fan's outer boundary, where a ray rounded by
+            // 1e-17 may legitimately pass outside, so they are not targets.)
+            let i = trial % m;
+            let s = 0.99 * rng.next_f64();
+            let target = if trial % 4 == 0 {
+                c
+            } else {
+                c + (rim[i] - c) * s
+            };
+            for side in [1.0, -1.0] {
+                // Origins on both sides, at various angles (never in the plane).
+                let off = DVec3::new(
+                    rng.next_f64() - 0.5,
+                    rng.next_f64() - 0.5,
+                    rng.next_f64() - 0.5,
+                ) * 0.8;
+                let org = target + n * (side * (0.05 + 0.4 * rng.next_f64())) + off;
+                if (org - target).dot(n) * side <= 0.0 {
+                    continue;
+                }
+                let dir = (target - org).normalize();
+                rays += 1;
+                let hit = scene.closest(org, dir, usize::MAX);
+                assert!(
+                    hit.is_some(),
+                    "ray {org:?} -> {target:?} slipped through the fan"
+                );
+                let hit = hit.unwrap();
+                assert!(
+                    (hit.point - target).length() < 1e-9,
+                    "hit far from the target"
+                );
+                // For information: obvhs' own f32 test.
+                let hit_f32 = patches.corners.iter().any(|t| {
+                    let tri = obvhs::triangle::Triangle {
+                        v0: t[0].as_vec3a(),
+                        v1: t[1].as_vec3a(),
+                        v2: t[2].as_vec3a(),
+                    };
+                    let ray = Ray::new_inf(org.as_vec3a(), dir.as_vec3a());
+                    tri.intersect(&ray).is_finite()
+                });
+                if !hit_f32 {
+                    f32_misses += 1;
+                }
+            }
+        }
+        assert!(rays > 600, "{rays}");
+        eprintln!("watertight: {rays} rays, f32 Moller-Trumbore missed {f32_misses}");
+    }
+
+    #[test]
+    fn watertight_rejects_points_outside() {
+        // Negative control: rays aimed just outside the fan's rim miss it.
+        let (tris, center, rim) = fan(7);
+        let patches = fan_patches(&tris);
+        let scene = RayScene::new(&patches);
+        let frame = patches.frame;
+        let c = frame.unit_from_world(center);
+        let n = patches.normal[0];
+        for (i, &r) in rim.iter().enumerate() {
+            let r = frame.unit_from_world(r);
+            let target = c + (r - c) * 1.001;
+            let org = target + n * 0.3 + DVec3::new(0.01, 0.02, -0.01) * i as f64;
+            let dir = (target - org).normalize();
+            assert!(scene.closest(org, dir, usize::MAX).is_none());
+        }
+    }
+
+    #[test]
+    fn watertight_exact_shared_edge_axis_aligned() {
+        // Two triangles sharing the diagonal of a unit square; rays straight down at points of the
+        // diagonal that are exactly representable.
+        let a = DVec3::new(0.0, 0.0, 0.0);
+        let b = DVec3::new(1.0, 0.0, 0.0);
+        let c = DVec3::new(1.0, 1.0, 0.0);
+        let d = DVec3::new(0.0, 1.0, 0.0);
+        let t1 = [a, b, c];
+        let t2 = [a, c, d];
+        for i in 0..=64 {
+            let s = i as f64 / 64.0;
+            let org = DVec3::new(s, s, 1.0);
+            let ray = WatertightRay::new(org, -DVec3::Z);
+            let h1 = ray.intersect(&t1, 0.0, f64::INFINITY);
+            let h2 = ray.intersect(&t2, 0.0, f64::INFINITY);
+            assert!(h1.is_some() || h2.is_some(), "miss at s = {s}");
+            for h in [h1, h2].into_iter().flatten() {
+                assert_eq!(h.t, 1.0);
+            }
+        }
+    }
+}

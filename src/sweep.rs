@@ -1,0 +1,997 @@
+//! `antiradiance sweep`: the speed/accuracy trade of the solver's knobs, measured.
+//!
+//! The command runs the chosen solver once per point of a grid of knob values (presets,
+//! direct-light on/off, bins, epsilon, tolerance, iteration cap), measures each run's solve time,
+//! iterations, links and peak memory, and its error against the path tracer (the design note's
+//! area-weighted relative L1 error over non-emissive triangles), then writes
+//!
+//! - a CSV, one row per run ([`CSV_HEADER`]), with a `pareto` column marking the runs no other run
+//!   beats in both time and error;
+//! - optionally an SVG plot of error against time (log time axis) with the Pareto front drawn as
+//!   a line and its points labelled;
+//! - a table on stdout.
+//!
+//! Like every command it checks every parameter and output path first, and writes nothing
+//! before every run is done (each writer is atomic).
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use clap::{Args, ValueEnum};
+use plotters::prelude::*;
+
+use crate::driver::{self, Loaded, Preset, SceneArgs, SolverKind, Timings};
+use crate::error::{Error, Result};
+use crate::output::{self, format_f64};
+use crate::reference::ReferenceOptions;
+use crate::solution::{relative_error, Solution};
+use crate::solve::SolverOptions;
+
+/// The exact header line of the sweep CSV (without the line break).
+pub const CSV_HEADER: &str = "run,preset,solver,epsilon,bins,tol,max_iterations,direct_light,\
+seconds,cpu_seconds,iterations,converged,residual,links,peak_memory_delta_bytes,negative_fraction,\
+error,pareto";
+
+/// Most runs one sweep may have (a guard against a grid that would run for days).
+pub const MAX_RUNS: usize = 1000;
+
+/// Which time the Pareto front and the plot use.
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TimeAxis {
+    /// Wall-clock seconds of each solve.
+    Wall,
+    /// CPU seconds of each solve, all threads (Linux): steadier than wall-clock time on a
+    /// machine shared with other jobs.
+    Cpu,
+}
+
+impl TimeAxis {
+    /// The axis title of the plot.
+    fn title(self) -> &'static str {
+        match self {
+            TimeAxis::Wall => "solve time (wall-clock s, log scale)",
+            TimeAxis::Cpu => "solve time (CPU s, all threads, log scale)",
+        }
+    }
+}
+
+/// `antiradiance sweep`: runs the solver over a grid of knob values and measures each run's
+/// time and error against the path tracer.
+///
+/// Every knob takes a comma-separated LIST; the word `preset` in a list stands for the value of
+/// the preset being run. The grid is the product of all lists.
+#[derive(Args, Clone, Debug)]
+pub struct SweepArgs {
+    #[command(flatten)]
+    pub scene: SceneArgs,
+    /// Solver to sweep (with dense, --epsilon does not apply: one run per other combination).
+    #[arg(long, value_enum, default_value_t = SolverKind::Hierarchical, help_heading = "Sweep options")]
+    pub solver: SolverKind,
+    /// Presets the runs start from: LIST of fast, default, accurate.
+    #[arg(
+        long,
+        value_name = "LIST",
+        default_value = "default",
+        help_heading = "Sweep options"
+    )]
+    pub preset: String,
+    /// Link refinement thresholds (LIST of numbers >= 0, or `preset`).
+    #[arg(
+        long,
+        value_name = "LIST",
+        default_value = "0.25,0.5,1,2",
+        allow_hyphen_values = true,
+        help_heading = "Sweep options"
+    )]
+    pub epsilon: String,
+    /// Direction bins per side of the octahedral map (LIST of integers, or `preset`).
+    #[arg(
+        long,
+        value_name = "LIST",
+        allow_hyphen_values = true,
+        default_value = "6,8,12",
+        help_heading = "Sweep options"
+    )]
+    pub bins: String,
+    /// Convergence tolerances (LIST of numbers in (0, 1), or `preset`).
+    #[arg(
+        long,
+        value_name = "LIST",
+        allow_hyphen_values = true,
+        default_value = "preset",
+        help_heading = "Sweep options"
+    )]
+    pub tol: String,
+    /// Iteration caps (LIST of integers >= 1, or `preset`).
+    #[arg(
+        long,
+        value_name = "LIST",
+        allow_hyphen_values = true,
+        default_value = "preset",
+        help_heading = "Sweep options"
+    )]
+    pub max_iterations: String,
+    /// Exact direct light (LIST of off, on).
+    #[arg(
+        long,
+        value_name = "LIST",
+        default_value = "off,on",
+        help_heading = "Sweep options"
+    )]
+    pub direct_light: String,
+    /// Split depth of the hierarchical solver for every run (default: the preset's).
+    #[arg(long, value_name = "D", help_heading = "Sweep options")]
+    pub split_depth: Option<u8>,
+    /// Antiradiance from both sides of every surface, in every run.
+    #[arg(long, help_heading = "Sweep options")]
+    pub two_sided_antiradiance: bool,
+    /// Per-triangle reference radiance: a CSV written by `antiradiance reference ...
+    /// --triangles REF.csv` on the same scene with the same scene options.
+    #[arg(long, value_name = "REF.csv", help_heading = "Reference")]
+    pub reference: Option<PathBuf>,
+    /// Compute the reference with the path tracer at N samples per patch instead.
+    #[arg(long, value_name = "N", help_heading = "Reference")]
+    pub reference_spp: Option<usize>,
+    /// Seed of the path tracer (with --reference-spp).
+    #[arg(
+        long,
+        value_name = "S",
+        default_value_t = 1,
+        help_heading = "Reference"
+    )]
+    pub seed: u64,
+    /// Also write the reference computed with --reference-spp (per-triangle CSV), to reuse it
+    /// with --reference.
+    #[arg(long, value_name = "OUT.csv", help_heading = "Reference")]
+    pub save_reference: Option<PathBuf>,
+    /// The results, one row per run.
+    #[arg(long, value_name = "OUT.csv", help_heading = "Output options")]
+    pub csv: PathBuf,
+    /// Plot of error against solve time with the Pareto front.
+    #[arg(long, value_name = "OUT.svg", help_heading = "Output options")]
+    pub svg: Option<PathBuf>,
+    /// Run the whole grid N times, round by round, and keep each run's shortest time (timings
+    /// on a busy machine are noisy; the results of the repeats are identical).
+    #[arg(
+        long,
+        value_name = "N",
+        default_value_t = 1,
+        help_heading = "Sweep options"
+    )]
+    pub repeat: usize,
+    /// Time used for the Pareto front and the plot (both are in the CSV).
+    #[arg(long, value_enum, default_value_t = TimeAxis::Wall, help_heading = "Sweep options")]
+    pub time_axis: TimeAxis,
+    /// No progress bars and no per-run lines (the table is still printed).
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+// ---------------------------------------------------------------------------------------------
+// The grid
+
+/// One value of a knob list: a value, or the value of the preset being run.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Choice<T> {
+    Value(T),
+    Preset,
+}
+
+impl<T: Copy> Choice<T> {
+    fn resolve(self, preset_value: T) -> T {
+        match self {
+            Choice::Value(v) => v,
+            Choice::Preset => preset_value,
+        }
+    }
+}
+
+/// Parses a comma-separated list for `--flag`: each item through `parse` (which says what it
+/// expected when it fails), or the word `preset` when `allow_preset`. Repeated items are kept
+/// once, in first-seen order.
+fn parse_list<T: Copy + PartialEq>(
+    flag: &str,
+    text: &str,
+    allow_preset: bool,
+    parse: impl Fn(&str) -> std::result::Result<T, String>,
+) -> Result<Vec<Choice<T>>> {
+    let mut out: Vec<Choice<T>> = Vec::new();
+    for item in text.split(',').map(str::trim) {
+        if item.is_empty() {
+            return Err(Error::Parameter(format!(
+                "--{flag} '{text}': empty item in the comma-separated list"
+            )));
+        }
+        let choice = if allow_preset && item.eq_ignore_ascii_case("preset") {
+            Choice::Preset
+        } else {
+            Choice::Value(
+                parse(item).map_err(|why| Error::Parameter(format!("--{flag} '{item}': {why}")))?,
+            )
+        };
+        if !out.contains(&choice) {
+            out.push(choice);
+        }
+    }
+    Ok(out)
+}
+
+fn parse_number(item: &str) -> std::result::Result<f64, String> {
+    item.parse::<f64>()
+        .ok()
+        .filter(|x| x.is_finite())
+        .ok_or_else(|| "not a finite number".to_string())
+}
+
+fn parse_count(item: &str) -> std::result::Result<usize, String> {
+    item.parse::<usize>()
+        .map_err(|_| "not a non-negative integer".to_string())
+}
+
+fn parse_switch(item: &str) -> std::result::Result<bool, String> {
+    match item.to_ascii_lowercase().as_str() {
+        "on" | "true" | "yes" | "1" => Ok(true),
+        "off" | "false" | "no" | "0" => Ok(false),
+        _ => Err("expected on or off".to_string()),
+    }
+}
+
+fn parse_preset(item: &str) -> std::result::Result<Preset, String> {
+    match item.to_ascii_lowercase().as_str() {
+        "fast" => Ok(Preset::Fast),
+        "default" => Ok(Preset::Default),
+        "accurate" => Ok(Preset::Accurate),
+        _ => Err("expected fast, default or accurate".to_string()),
+    }
+}
+
+/// One point of the grid: the preset it starts from and the complete, validated options.
+#[derive(Clone, Debug)]
+pub struct RunSpec {
+    /// The preset the run starts from.
+    pub preset: Preset,
+    /// The solver options of the run (preset with the grid's values applied).
+    pub options: SolverOptions,
+}
+
+impl RunSpec {
+    /// The knob values that identify a run (for removing duplicates from the grid).
+    fn key(&self) -> (&'static str, usize, u64, u64, usize, bool) {
+        let o = &self.options;
+        (
+            self.preset.name(),
+            o.bins,
+            o.epsilon.to_bits(),
+            o.tol.to_bits(),
+            o.max_iterations,
+            o.direct_light,
+        )
+    }
+}
+
+impl SweepArgs {
+    /// The grid of runs, every one validated, in the order they will run (presets, then direct
+    /// light off/on, bins, epsilon, tolerance, iteration cap). Fails on a malformed list, an
+    /// out-of-range value (naming the flag) or a grid of more than [`MAX_RUNS`] runs.
+    pub fn runs(&self) -> Result<Vec<RunSpec>> {
+        let presets = parse_list("preset", &self.preset, false, parse_preset)?;
+        let direct = parse_list("direct-light", &self.direct_light, false, parse_switch)?;
+        let bins = parse_list("bins", &self.bins, true, parse_count)?;
+        let epsilon = match self.solver {
+            SolverKind::Hierarchical => parse_list("epsilon", &self.epsilon, true, parse_number)?,
+            // The dense solver has no links to refine: one run, whatever the list says.
+            SolverKind::Dense => vec![Choice::Preset],
+        };
+        let tol = parse_list("tol", &self.tol, true, parse_number)?;
+        let max_iterations = parse_list("max-iterations", &self.max_iterations, true, parse_count)?;
+        let count = presets.len()
+            * direct.len()
+            * bins.len()
+            * epsilon.len()
+            * tol.len()
+            * max_iterations.len();
+        if count > MAX_RUNS {
+            return Err(Error::Parameter(format!(
+                "the sweep grid has {count} runs (at most {MAX_RUNS}); shorten the lists"
+            )));
+        }
+        let mut runs: Vec<RunSpec> = Vec::with_capacity(count);
+        for preset in presets.iter().map(|p| p.resolve(Preset::Default)) {
+            let base = SolverOptions::preset(preset.name())?;
+            for d in &direct {
+                let direct_light = d.resolve(false);
+                for b in &bins {
+                    for e in &epsilon {
+                        for t in &tol {
+                            for m in &max_iterations {
+                                let mut options = base.clone();
+                                options.bins = b.resolve(base.bins);
+                                options.epsilon = e.resolve(base.epsilon);
+                                options.tol = t.resolve(base.tol);
+                                options.max_iterations = m.resolve(base.max_iterations);
+                                options.direct_light = direct_light;
+                                options.two_sided = self.two_sided_antiradiance;
+                                if let Some(depth) = self.split_depth {
+                                    options.split_depth = depth;
+                                }
+                                options.validate()?;
+                                let run = RunSpec { preset, options };
+                                if !runs.iter().any(|r| r.key() == run.key()) {
+                                    runs.push(run);
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        Ok(runs)
+    }
+
+    /// Checks the reference options and every output path (before anything is loaded).
+    fn check_files(&self) -> Result<()> {
+        match (&self.reference, self.reference_spp) {
+            (None, None) => {
+                return Err(Error::Parameter(
+                    "sweep needs a reference: --reference REF.csv or --reference-spp N".into(),
+                ))
+            }
+            (Some(_), Some(_)) => {
+                return Err(Error::Parameter(
+                    "give either --reference or --reference-spp, not both".into(),
+                ))
+            }
+            (None, Some(0)) => {
+                return Err(Error::Parameter(
+                    "--reference-spp must be at least 1".into(),
+                ))
+            }
+            _ => {}
+        }
+        if self.time_axis == TimeAxis::Cpu && process_cpu_seconds().is_none() {
+            return Err(Error::Parameter(
+                "--time-axis cpu needs /proc/self/stat (Linux); use --time-axis wall".into(),
+            ));
+        }
+        if !(1..=100).contains(&self.repeat) {
+            return Err(Error::Parameter(format!(
+                "--repeat {} outside 1..=100",
+                self.repeat
+            )));
+        }
+        if self.save_reference.is_some() && self.reference_spp.is_none() {
+            return Err(Error::Parameter(
+                "--save-reference needs --reference-spp (it saves the reference computed here)"
+                    .into(),
+            ));
+        }
+        let mut files: Vec<(&str, &Path)> = vec![("--csv", self.csv.as_path())];
+        if let Some(p) = &self.svg {
+            files.push(("--svg", p.as_path()));
+        }
+        if let Some(p) = &self.save_reference {
+            files.push(("--save-reference", p.as_path()));
+        }
+        driver::check_outputs(&files, &self.scene.scene)?;
+        if let Some(reference) = &self.reference {
+            let same = |a: &Path, b: &Path| match (a.canonicalize(), b.canonicalize()) {
+                (Ok(x), Ok(y)) => x == y,
+                _ => false,
+            };
+            for (flag, path) in &files {
+                if same(path, reference) {
+                    return Err(Error::Io {
+                        path: path.to_path_buf(),
+                        message: format!("{flag} would overwrite the --reference file"),
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Running
+
+/// The measurements of one run.
+#[derive(Clone, Debug)]
+pub struct RunResult {
+    /// What was run.
+    pub spec: RunSpec,
+    /// Wall-clock seconds of the solve (tree, links, direct light and iterations; not loading),
+    /// the shortest of the `--repeat` rounds.
+    pub seconds: f64,
+    /// CPU seconds of the solve, all threads (Linux only), the shortest of the rounds.
+    pub cpu_seconds: Option<f64>,
+    /// Iterations performed.
+    pub iterations: usize,
+    /// True when the tolerance was met before the iteration cap.
+    pub converged: bool,
+    /// Final relative residual.
+    pub residual: f64,
+    /// Transport links.
+    pub links: u64,
+    /// Peak resident memory during the solve above the memory before it, bytes (Linux only;
+    /// the largest of the `--repeat` rounds). Memory the allocator kept from an earlier run
+    /// is not counted again, so small runs may show 0.
+    pub peak_memory_delta_bytes: Option<u64>,
+    /// Negative radiance mass relative to the positive mass (before clamping).
+    pub negative_fraction: f64,
+    /// Design-note error against the reference (fraction, not percent).
+    pub error: f64,
+    /// True when no other run is at least as fast and as accurate and better in one of them.
+    pub pareto: bool,
+}
+
+impl RunResult {
+    /// The run's time on the chosen axis (NaN when CPU time is unknown).
+    pub fn time(&self, axis: TimeAxis) -> f64 {
+        match axis {
+            TimeAxis::Wall => self.seconds,
+            TimeAxis::Cpu => self.cpu_seconds.unwrap_or(f64::NAN),
+        }
+    }
+}
+
+/// CPU time (user + system, all threads) this process has used so far, in seconds, from
+/// `/proc/self/stat` (fields 14 and 15, in clock ticks of 1/100 s: Linux's `USER_HZ` on every
+/// common architecture). `None` off Linux or when the file cannot be read. Resolution 10 ms.
+pub fn process_cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // The command name (field 2) is in parentheses and may hold spaces: split after it.
+    let rest = &stat[stat.rfind(')')? + 1..];
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    // `fields[0]` is field 3 (state), so field n is `fields[n - 3]`.
+    let utime: u64 = fields.get(11)?.parse().ok()?;
+    let stime: u64 = fields.get(12)?.parse().ok()?;
+    Some((utime + stime) as f64 / 100.0)
+}
+
+/// For points (seconds, error), true where no other point is at least as good in both and
+/// strictly better in one: the Pareto front of the speed/accuracy trade. NaN points are never on
+/// the front and never dominate.
+pub fn pareto_front(points: &[(f64, f64)]) -> Vec<bool> {
+    let valid = |p: &(f64, f64)| p.0.is_finite() && p.1.is_finite();
+    points
+        .iter()
+        .map(|p| {
+            valid(p)
+                && !points
+                    .iter()
+                    .any(|q| valid(q) && q.0 <= p.0 && q.1 <= p.1 && (q.0 < p.0 || q.1 < p.1))
+        })
+        .collect()
+}
+
+/// The reference solution per input triangle: read from `--reference` (checked against the
+/// scene's triangle count) or computed with the path tracer.
+fn reference_radiance(
+    args: &SweepArgs,
+    loaded: &Loaded,
+    file: Option<Vec<[f64; 3]>>,
+) -> Result<Vec<[f64; 3]>> {
+    if let Some(values) = file {
+        if values.len() != loaded.scene.len() {
+            let path = args.reference.clone().unwrap_or_default();
+            return Err(Error::Parameter(format!(
+                "{}: {} rows but the scene has {} triangles (was it written for the same scene and --max-edge?)",
+                path.display(),
+                values.len(),
+                loaded.scene.len()
+            )));
+        }
+        return Ok(values);
+    }
+    let options = ReferenceOptions {
+        spp: args.reference_spp.unwrap_or(1),
+        seed: args.seed,
+        ..ReferenceOptions::default()
+    };
+    let truth: Solution = driver::run_reference(&loaded.patches, &options, args.quiet);
+    if let Some(path) = &args.save_reference {
+        output::write_triangles_csv(path, &loaded.scene, &truth)?;
+    }
+    Ok(truth.triangle_radiance)
+}
+
+/// `antiradiance sweep`.
+pub fn sweep(args: &SweepArgs) -> Result<()> {
+    // 1. Check every parameter and path; read the reference file (a bad one fails before the
+    //    scene is even loaded).
+    args.scene.validate()?;
+    let runs = args.runs()?;
+    args.check_files()?;
+    let reference_file = match &args.reference {
+        Some(path) => Some(output::read_triangles_csv(path)?),
+        None => None,
+    };
+
+    // 2. Load the scene and get the reference.
+    let mut timings = Timings::default();
+    let loaded = driver::load(&args.scene, &mut timings)?;
+    let truth = reference_radiance(args, &loaded, reference_file)?;
+    let areas: Vec<f64> = (0..loaded.scene.len())
+        .map(|t| loaded.scene.area(t))
+        .collect();
+    let emissive: Vec<bool> = (0..loaded.scene.len())
+        .map(|t| loaded.scene.is_emitter(t))
+        .collect();
+
+    // 3. Run the grid, one solve at a time (each solve uses every core). With --repeat, the
+    //    whole grid runs again round by round, so that a burst of load from other jobs hits
+    //    every run alike; each run keeps its shortest time and its largest memory figure.
+    let mut overall_peak = None;
+    let total = runs.len();
+    let mut results: Vec<RunResult> = Vec::with_capacity(total);
+    for round in 0..args.repeat {
+        for (i, spec) in runs.iter().enumerate() {
+            let cpu_before = process_cpu_seconds();
+            let (solution, seconds, delta) = driver::measured(&mut overall_peak, || {
+                driver::run_solver(args.solver, &loaded.patches, &spec.options, args.quiet)
+            });
+            let cpu_seconds = match (cpu_before, process_cpu_seconds()) {
+                (Some(a), Some(b)) => Some((b - a).max(0.0)),
+                _ => None,
+            };
+            if round > 0 {
+                let r = &mut results[i];
+                r.seconds = r.seconds.min(seconds);
+                r.cpu_seconds = match (r.cpu_seconds, cpu_seconds) {
+                    (Some(a), Some(b)) => Some(a.min(b)),
+                    (a, b) => a.or(b),
+                };
+                r.peak_memory_delta_bytes = r.peak_memory_delta_bytes.max(delta);
+                continue;
+            }
+            let error = relative_error(&areas, &emissive, &solution.triangle_radiance, &truth);
+            let s = &solution.stats;
+            let result = RunResult {
+                spec: spec.clone(),
+                seconds,
+                cpu_seconds,
+                iterations: s.iterations,
+                converged: s.converged,
+                residual: s.residual,
+                links: s.links,
+                peak_memory_delta_bytes: delta,
+                negative_fraction: s.negative_fraction,
+                error,
+                pareto: false,
+            };
+            if !args.quiet {
+                eprintln!(
+                    "run {}/{}: {} -> {:.3} s ({} CPU s), {} iterations, error {:.3}%",
+                    i + 1,
+                    total,
+                    describe(&result.spec, args.solver),
+                    seconds,
+                    cpu_seconds
+                        .map(|c| format!("{c:.2}"))
+                        .unwrap_or_else(|| "n/a".into()),
+                    result.iterations,
+                    100.0 * error
+                );
+            }
+            results.push(result);
+        }
+    }
+    let front = pareto_front(
+        &results
+            .iter()
+            .map(|r| (r.time(args.time_axis), r.error))
+            .collect::<Vec<_>>(),
+    );
+    for (r, on_front) in results.iter_mut().zip(front) {
+        r.pareto = on_front;
+    }
+
+    // 4. Outputs: CSV, plot, table.
+    write_csv(&args.csv, args.solver, &results)?;
+    if let Some(path) = &args.svg {
+        let mut scene_label = args
+            .scene
+            .scene
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        if let Some(y) = args.scene.emit_above {
+            scene_label += &format!(" --emit-above {y}");
+        }
+        if let Some(l) = args.scene.max_edge {
+            scene_label += &format!(" --max-edge {l}");
+        }
+        let title = format!(
+            "{scene_label}: error vs solve time ({} solver)",
+            args.solver.name()
+        );
+        write_svg(path, &title, args.solver, args.time_axis, &results)?;
+    }
+    let mut stdout = std::io::stdout().lock();
+    // A closed pipe (`| head`) is not an error worth a message.
+    let _ = stdout.write_all(table(args.solver, &results).as_bytes());
+    let _ = stdout.flush();
+    Ok(())
+}
+
+// ---------------------------------------------------------------------------------------------
+// Outputs
+
+/// A run's knobs in words, for progress lines.
+fn describe(spec: &RunSpec, solver: SolverKind) -> String {
+    let o = &spec.options;
+    let mut s = format!("preset {}, bins {}", spec.preset.name(), o.bins);
+    if solver == SolverKind::Hierarchical {
+        s += &format!(", epsilon {}", o.epsilon);
+    }
+    s += &format!(
+        ", tol {:e}, max iterations {}, direct light {}",
+        o.tol,
+        o.max_iterations,
+        if o.direct_light { "on" } else { "off" }
+    );
+    s
+}
+
+/// Short labels of the runs for the plot: only the knobs that vary across the sweep
+/// (`b` bins, `e` epsilon, `t` tolerance, `n` iteration cap, `DL` direct light on).
+fn labels(results: &[RunResult], solver: SolverKind) -> Vec<String> {
+    type Part = fn(&RunResult) -> String;
+    let mut parts: Vec<Part> = vec![|r| r.spec.preset.name().to_string(), |r| {
+        format!("b{}", r.spec.options.bins)
+    }];
+    if solver == SolverKind::Hierarchical {
+        parts.push(|r| format!("e{}", r.spec.options.epsilon));
+    }
+    parts.push(|r| format!("t{:e}", r.spec.options.tol));
+    parts.push(|r| format!("n{}", r.spec.options.max_iterations));
+    parts.push(|r| {
+        if r.spec.options.direct_light {
+            "DL".to_string()
+        } else {
+            String::new()
+        }
+    });
+    let varying: Vec<Part> = match results.first() {
+        Some(first) => parts
+            .into_iter()
+            .filter(|f| results.iter().any(|r| f(r) != f(first)))
+            .collect(),
+        None => Vec::new(),
+    };
+    results
+        .iter()
+        .map(|r| {
+            varying
+                .iter()
+                .map(|f| f(r))
+                .filter(|s| !s.is_empty())
+                .collect::<Vec<_>>()
+                .join(" ")
+        })
+        .collect()
+}
+
+/// Writes the CSV (atomically): [`CSV_HEADER`], then one row per run in run order.
+fn write_csv(path: &Path, solver: SolverKind, results: &[RunResult]) -> Result<()> {
+    output::write_atomic(path, |w| {
+        writeln!(w, "{CSV_HEADER}")?;
+        for (i, r) in results.iter().enumerate() {
+            let o = &r.spec.options;
+            writeln!(
+                w,
+                "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+                i + 1,
+                r.spec.preset.name(),
+                solver.name(),
+                if solver == SolverKind::Hierarchical {
+                    format_f64(o.epsilon)
+                } else {
+                    String::new()
+                },
+                o.bins,
+                format_f64(o.tol),
+                o.max_iterations,
+                u8::from(o.direct_light),
+                format_f64(r.seconds),
+                r.cpu_seconds.map(|c| format!("{c:.2}")).unwrap_or_default(),
+                r.iterations,
+                u8::from(r.converged),
+                format_f64(r.residual),
+                r.links,
+                r.peak_memory_delta_bytes
+                    .map(|b| b.to_string())
+                    .unwrap_or_default(),
+                format_f64(r.negative_fraction),
+                format_f64(r.error),
+                u8::from(r.pareto)
+            )?;
+        }
+        Ok(())
+    })
+}
+
+/// The table printed on stdout.
+fn table(solver: SolverKind, results: &[RunResult]) -> String {
+    let mut out = format!(
+        "{:>4} {:<9} {:>8} {:>5} {:>8} {:>6} {:>7} {:>10} {:>8} {:>6} {:>12} {:>10} {:>9}\n",
+        "run",
+        "preset",
+        "epsilon",
+        "bins",
+        "tol",
+        "cap",
+        "direct",
+        "time (s)",
+        "cpu (s)",
+        "iter",
+        "links",
+        "peak mem",
+        "error"
+    );
+    for (i, r) in results.iter().enumerate() {
+        let o = &r.spec.options;
+        out += &format!(
+            "{:>4} {:<9} {:>8} {:>5} {:>8.1e} {:>6} {:>7} {:>10.3} {:>8} {:>6} {:>12} {:>10} {:>8.3}%{}\n",
+            i + 1,
+            r.spec.preset.name(),
+            if solver == SolverKind::Hierarchical {
+                format!("{}", o.epsilon)
+            } else {
+                "-".into()
+            },
+            o.bins,
+            o.tol,
+            o.max_iterations,
+            if o.direct_light { "on" } else { "off" },
+            r.seconds,
+            r.cpu_seconds
+                .map(|c| format!("{c:.2}"))
+                .unwrap_or_else(|| "n/a".into()),
+            if r.converged {
+                r.iterations.to_string()
+            } else {
+                format!("{}!", r.iterations)
+            },
+            r.links,
+            r.peak_memory_delta_bytes
+                .map(driver::format_bytes)
+                .unwrap_or_else(|| "n/a".into()),
+            100.0 * r.error,
+            if r.pareto { "  *" } else { "" }
+        );
+    }
+    out += "* = on the Pareto front (no other run is both faster and more accurate on the chosen \
+            time axis); ! = stopped at the iteration cap\n";
+    out
+}
+
+/// Draws error (percent) against solve time (log axis) into an SVG string.
+fn plot(
+    title: &str,
+    solver: SolverKind,
+    axis: TimeAxis,
+    results: &[RunResult],
+) -> std::result::Result<String, String> {
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (960, 640)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        // Runs without a time on this axis (CPU time unavailable) sit at the left edge.
+        let times: Vec<f64> = results
+            .iter()
+            .map(|r| {
+                let t = r.time(axis);
+                if t.is_finite() {
+                    t.max(1e-3)
+                } else {
+                    1e-3
+                }
+            })
+            .collect();
+        let errors: Vec<f64> = results.iter().map(|r| 100.0 * r.error).collect();
+        let t_lo = times.iter().copied().fold(f64::INFINITY, f64::min) / 1.4;
+        let t_hi = times.iter().copied().fold(0.0, f64::max) * 1.4;
+        let e_hi = errors.iter().copied().fold(0.0, f64::max).max(1e-3) * 1.15;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 22))
+            .margin(20)
+            .x_label_area_size(50)
+            .y_label_area_size(70)
+            .build_cartesian_2d((t_lo..t_hi).log_scale(), 0.0..e_hi)
+            .map_err(|e| e.to_string())?;
+        chart
+            .configure_mesh()
+            .x_desc(axis.title())
+            .y_desc("error vs path tracer (%)")
+            .label_style(("sans-serif", 14))
+            .x_label_formatter(&|x| short_number(*x))
+            .y_label_formatter(&|y| short_number(*y))
+            .draw()
+            .map_err(|e| e.to_string())?;
+
+        // Runs, coloured by direct light; the front's points filled.
+        let off = RGBColor(40, 90, 200);
+        let on = RGBColor(210, 60, 40);
+        for (direct, colour, name) in [
+            (false, off, "direct light off"),
+            (true, on, "direct light on"),
+        ] {
+            let points: Vec<(f64, f64, bool)> = results
+                .iter()
+                .zip(times.iter().zip(&errors))
+                .filter(|(r, _)| r.spec.options.direct_light == direct)
+                .map(|(r, (&t, &e))| (t, e, r.pareto))
+                .collect();
+            if points.is_empty() {
+                continue;
+            }
+            chart
+                .draw_series(points.iter().map(|&(t, e, front)| {
+                    let style = if front {
+                        colour.filled()
+                    } else {
+                        colour.stroke_width(2)
+                    };
+                    Circle::new((t, e), if front { 6 } else { 4 }, style)
+                }))
+                .map_err(|e| e.to_string())?
+                .label(name)
+                .legend(move |(x, y)| Circle::new((x, y), 5, colour.filled()));
+        }
+
+        // The Pareto front, in time order, and labels.
+        let mut front: Vec<usize> = (0..results.len()).filter(|&i| results[i].pareto).collect();
+        front.sort_by(|&a, &b| times[a].total_cmp(&times[b]));
+        chart
+            .draw_series(LineSeries::new(
+                front.iter().map(|&i| (times[i], errors[i])),
+                BLACK.stroke_width(1),
+            ))
+            .map_err(|e| e.to_string())?
+            .label("Pareto front")
+            .legend(|(x, y)| PathElement::new(vec![(x - 10, y), (x + 10, y)], BLACK));
+        // Labels: the front's first (full knob labels), then the other runs' numbers; each
+        // goes to the first of four places around its point that overlaps no earlier label,
+        // and a run number that finds no free place is left out.
+        let names = labels(results, solver);
+        let mut order: Vec<usize> = front.clone();
+        order.extend((0..results.len()).filter(|&i| !results[i].pareto));
+        let mut taken: Vec<(i32, i32, i32, i32)> = Vec::new();
+        for i in order {
+            let on_front = results[i].pareto;
+            let (px, py) = chart.backend_coord(&(times[i], errors[i]));
+            // Candidates: the full label (front only), then the run number alone.
+            let mut candidates = Vec::new();
+            if on_front {
+                candidates.push((format!("{} {}", i + 1, names[i]), 13));
+            }
+            candidates.push(((i + 1).to_string(), if on_front { 13 } else { 11 }));
+            let fits = |text: &str, size: i32| {
+                let width = (0.62 * size as f64 * text.chars().count() as f64).ceil() as i32;
+                let height = size + 2;
+                let places = [
+                    (7, -height - 2),
+                    (7, 3),
+                    (-7 - width, -height - 2),
+                    (-7 - width, 3),
+                ];
+                places
+                    .into_iter()
+                    .find(|&(dx, dy)| {
+                        let (x0, y0) = (px + dx, py + dy);
+                        !taken.iter().any(|&(a0, b0, a1, b1)| {
+                            x0 < a1 && a0 < x0 + width && y0 < b1 && b0 < y0 + height
+                        })
+                    })
+                    .map(|(dx, dy)| (dx, dy, width, height))
+            };
+            let placed = candidates
+                .iter()
+                .find_map(|(text, size)| fits(text, *size).map(|p| (text.clone(), *size, p)));
+            let (text, size, (dx, dy, width, height)) = match placed {
+                Some(p) => p,
+                // A front point always gets its number, even over another label.
+                None if on_front => {
+                    let text = (i + 1).to_string();
+                    let width = (0.62 * 13.0 * text.len() as f64).ceil() as i32;
+                    (text, 13, (7, -17, width, 15))
+                }
+                None => continue,
+            };
+            taken.push((px + dx, py + dy, px + dx + width, py + dy + height));
+            let colour = if on_front {
+                BLACK
+            } else {
+                RGBColor(120, 120, 120)
+            };
+            let style = ("sans-serif", size).into_font().color(&colour);
+            chart
+                .plotting_area()
+                .draw(&(EmptyElement::at((times[i], errors[i])) + Text::new(text, (dx, dy), style)))
+                .map_err(|e| e.to_string())?;
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 14))
+            .draw()
+            .map_err(|e| e.to_string())?;
+        root.present().map_err(|e| e.to_string())?;
+    }
+    Ok(svg)
+}
+
+/// A tick label: 3 significant digits at most, no trailing zeros (`0.3`, `1.25`, `12`).
+fn short_number(x: f64) -> String {
+    if !(x.is_finite() && x != 0.0) {
+        return "0".to_string();
+    }
+    let decimals = (2 - x.abs().log10().floor() as i32).clamp(0, 12) as usize;
+    let text = format!("{x:.decimals$}");
+    if text.contains('.') {
+        text.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        text
+    }
+}
+
+/// Writes the plot (atomically).
+fn write_svg(
+    path: &Path,
+    title: &str,
+    solver: SolverKind,
+    axis: TimeAxis,
+    results: &[RunResult],
+) -> Result<()> {
+    let svg = plot(title, solver, axis, results).map_err(|e| Error::Io {
+        path: path.to_path_buf(),
+        message: format!("cannot draw the plot: {}", driver::one_line(&e)),
+    })?;
+    output::write_atomic(path, |w| w.write_all(svg.as_bytes()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pareto_front_keeps_the_undominated() {
+        let points = [
+            (1.0, 5.0),
+            (2.0, 3.0),
+            (3.0, 4.0),
+            (4.0, 1.0),
+            (2.0, 3.0),
+            (f64::NAN, 0.0),
+        ];
+        assert_eq!(
+            pareto_front(&points),
+            vec![true, true, false, true, true, false]
+        );
+    }
+
+    #[test]
+    fn tick_labels_are_short() {
+        assert_eq!(short_number(0.30000000000000004), "0.3");
+        assert_eq!(short_number(1.25), "1.25");
+        assert_eq!(short_number(12.0), "12");
+        assert_eq!(short_number(0.0125), "0.0125");
+        assert_eq!(short_number(2000.0), "2000");
+    }
+
+    #[test]
+    fn lists_parse_and_reject() {
+        let l = parse_list("bins", "6, 8,preset,8", true, parse_count).unwrap();
+        assert_eq!(l, vec![Choice::Value(6), Choice::Value(8), Choice::Preset]);
+        assert!(parse_list("bins", "6,,8", true, parse_count).is_err());
+        assert!(parse_list("bins", "preset", false, parse_count).is_err());
+        assert!(parse_list("epsilon", "0.1,nan", true, parse_number).is_err());
+        assert_eq!(
+            parse_list("direct-light", "on,OFF,1", false, parse_switch).unwrap(),
+            vec![Choice::Value(true), Choice::Value(false)]
+        );
+    }
+}
