@@ -16,7 +16,10 @@
 //!
 //! - the unoccluded part `U = sum_s E_s F(e <- s)` is analytic (Lambert's point-to-triangle form
 //!   factor, the emitter clipped to the receiver's front half-space, integrated over the element
-//!   with 1..6 x 6 points chosen by separation, as the solvers' couplings do);
+//!   with 1..6 x 6 points chosen by separation, as the solvers' couplings do); emitters joined
+//!   edge to edge with the same emission and normal form an [`EmitterGroup`] whose members'
+//!   far-field terms are one contour sum over the group's boundary (exactly the members' sum),
+//!   so a light made of hundreds of triangles costs about as much as its rim;
 //! - the visible fraction comes from shadow rays: stratified points on the element, emitters
 //!   chosen by power (area x largest emission channel) with stratified choices, stratified points
 //!   on the chosen emitter; each sample's unoccluded contribution `f_i` is weighed by its
@@ -119,6 +122,196 @@ impl Emitters {
     }
 }
 
+/// Largest deviation between the normals of two emitters merged into one group (|n_a - n_b|,
+/// about the angle in radians).
+const GROUP_NORMAL_TOLERANCE: f64 = 1e-3;
+
+/// A set of emitters joined edge to edge, with the same emission and (nearly) the same normal,
+/// such as a ceiling light made of hundreds of triangles.
+///
+/// Seen from a point in front of every member and with every member in front of the point's
+/// plane, the members' form factors sum to Lambert's contour sum over the group's boundary
+/// only: each shared edge appears in its two triangles with opposite directions, and its two
+/// terms cancel exactly (whatever the triangles' planes). So the group costs its boundary edges
+/// instead of three edges per member.
+struct EmitterGroup {
+    /// Indices into [`Emitters`].
+    members: Vec<u32>,
+    /// Directed boundary edges (start, end), in the members' counter-clockwise order.
+    boundary: Vec<(DVec3, DVec3)>,
+    /// The members' corners without repeats (for the receiver-plane test).
+    vertices: Vec<DVec3>,
+    /// Area-weighted mean unit normal and centroid.
+    normal: DVec3,
+    centroid: DVec3,
+    /// Largest |n_member - normal|.
+    normal_spread: f64,
+    /// Largest distance of a vertex from the mean plane.
+    thickness: f64,
+    /// Bounding sphere of the vertices: centre and radius.
+    center: DVec3,
+    radius: f64,
+    /// The members' common emission (normalized units).
+    emission: [f64; 3],
+}
+
+/// A point's bits as a hash key (with -0.0 folded into 0.0, so equal points give equal keys).
+fn point_key(p: DVec3) -> [u64; 3] {
+    [
+        (p.x + 0.0).to_bits(),
+        (p.y + 0.0).to_bits(),
+        (p.z + 0.0).to_bits(),
+    ]
+}
+
+/// Root of `i` in a union-find forest (with path halving).
+fn find_root(parent: &mut [u32], mut i: u32) -> u32 {
+    while parent[i as usize] != i {
+        parent[i as usize] = parent[parent[i as usize] as usize];
+        i = parent[i as usize];
+    }
+    i
+}
+
+/// Groups the emitters: two emitters join when they share an edge traversed in opposite
+/// directions (bit-identical end points), emit exactly the same radiance and have normals within
+/// [`GROUP_NORMAL_TOLERANCE`]. Every emitter is in exactly one group (often alone).
+fn group_emitters(emitters: &Emitters) -> Vec<EmitterGroup> {
+    use std::collections::HashMap;
+    let n = emitters.len();
+    // 1. Union over shared edges.
+    let mut parent: Vec<u32> = (0..n as u32).collect();
+    let mut edge_owner: HashMap<([u64; 3], [u64; 3]), u32> = HashMap::new();
+    for (k, g) in emitters.geom.iter().enumerate() {
+        for i in 0..3 {
+            let (a, b) = (point_key(g.corners[i]), point_key(g.corners[(i + 1) % 3]));
+            edge_owner.insert((a, b), k as u32);
+        }
+    }
+    for (k, g) in emitters.geom.iter().enumerate() {
+        for i in 0..3 {
+            let (a, b) = (point_key(g.corners[i]), point_key(g.corners[(i + 1) % 3]));
+            let Some(&other) = edge_owner.get(&(b, a)) else {
+                continue;
+            };
+            let o = other as usize;
+            if o == k
+                || emitters.emission[o] != emitters.emission[k]
+                || (emitters.geom[o].normal - g.normal).length() > GROUP_NORMAL_TOLERANCE
+            {
+                continue;
+            }
+            let (ra, rb) = (
+                find_root(&mut parent, k as u32),
+                find_root(&mut parent, other),
+            );
+            if ra != rb {
+                parent[ra.max(rb) as usize] = ra.min(rb);
+            }
+        }
+    }
+    // 2. Members per group, in emitter order.
+    let mut members_of: HashMap<u32, Vec<u32>> = HashMap::new();
+    for k in 0..n as u32 {
+        let root = find_root(&mut parent, k);
+        members_of.entry(root).or_default().push(k);
+    }
+    let mut roots: Vec<u32> = members_of.keys().copied().collect();
+    roots.sort_unstable();
+    // 3. Boundary, plane and bounds of each group.
+    roots
+        .into_iter()
+        .map(|root| {
+            let members = members_of.remove(&root).unwrap_or_default();
+            // Directed edge (start key, end key) -> (start, end, copies).
+            type DirectedEdges = HashMap<([u64; 3], [u64; 3]), (DVec3, DVec3, u32)>;
+            let mut directed: DirectedEdges = HashMap::new();
+            let mut vertices: HashMap<[u64; 3], DVec3> = HashMap::new();
+            let mut normal_sum = DVec3::ZERO;
+            let mut centroid_sum = DVec3::ZERO;
+            let mut area = 0.0;
+            for &m in &members {
+                let g = &emitters.geom[m as usize];
+                normal_sum += g.normal * g.area;
+                centroid_sum += g.centroid * g.area;
+                area += g.area;
+                for i in 0..3 {
+                    let (a, b) = (g.corners[i], g.corners[(i + 1) % 3]);
+                    vertices.insert(point_key(a), a);
+                    directed
+                        .entry((point_key(a), point_key(b)))
+                        .or_insert((a, b, 0))
+                        .2 += 1;
+                }
+            }
+            // An edge is interior when its reverse belongs to the group too: the pair cancels
+            // (copies beyond a pair stay, so the sum always equals the members' sum).
+            let mut boundary = Vec::new();
+            let mut keys: Vec<_> = directed.keys().copied().collect();
+            keys.sort_unstable();
+            for key in keys {
+                let (a, b, count) = directed[&key];
+                let reverse = directed.get(&(key.1, key.0)).map_or(0, |e| e.2);
+                for _ in 0..count.saturating_sub(reverse) {
+                    boundary.push((a, b));
+                }
+            }
+            let normal = normal_sum.normalize_or_zero();
+            let centroid = centroid_sum / area;
+            let mut vertex_list: Vec<([u64; 3], DVec3)> = vertices.into_iter().collect();
+            vertex_list.sort_unstable_by_key(|v| v.0);
+            let vertices: Vec<DVec3> = vertex_list.into_iter().map(|v| v.1).collect();
+            let center = vertices.iter().copied().sum::<DVec3>() / vertices.len() as f64;
+            let radius = vertices
+                .iter()
+                .map(|v| (*v - center).length())
+                .fold(0.0, f64::max);
+            let thickness = vertices
+                .iter()
+                .map(|v| normal.dot(*v - centroid).abs())
+                .fold(0.0, f64::max);
+            let normal_spread = members
+                .iter()
+                .map(|&m| (emitters.geom[m as usize].normal - normal).length())
+                .fold(0.0, f64::max);
+            EmitterGroup {
+                emission: emitters.emission[members[0] as usize],
+                members,
+                boundary,
+                vertices,
+                normal,
+                centroid,
+                normal_spread,
+                thickness,
+                center,
+                radius,
+            }
+        })
+        .collect()
+}
+
+/// Lambert's contour sum for a closed set of directed edges seen from `x` (normal `n_x`): the
+/// form factor of any surface they bound that lies in front of `x` and faces it, in [0, 1].
+/// The same sum as [`geometry::point_form_factor`] over each of the surface's triangles.
+fn contour_form_factor(x: DVec3, n_x: DVec3, edges: &[(DVec3, DVec3)]) -> f64 {
+    let mut sum = 0.0;
+    for &(a, b) in edges {
+        let (a, b) = (a - x, b - x);
+        let cross = a.cross(b);
+        let cross_len = cross.length();
+        if cross_len == 0.0 {
+            continue;
+        }
+        sum += cross_len.atan2(a.dot(b)) * n_x.dot(cross) / cross_len;
+    }
+    let f = (sum / (2.0 * PI)).abs();
+    if f.is_finite() {
+        f.min(1.0)
+    } else {
+        0.0
+    }
+}
+
 /// Receiver points per side for an element and an emitter at [`separation`] `ratio`: the rule
 /// of the solvers' couplings (`transport::couple`), so the direct light is integrated over the
 /// receiver as finely as the transport it replaces.
@@ -149,6 +342,7 @@ pub fn shadow_samples(receivers: usize) -> usize {
 pub struct DirectLight<'a> {
     patches: &'a Patches,
     emitters: Emitters,
+    groups: Vec<EmitterGroup>,
     rays: RayScene<'a>,
     /// Shadow samples per receiving element (k x k).
     samples: usize,
@@ -159,9 +353,11 @@ impl<'a> DirectLight<'a> {
     /// [`crate::mesh::build_patches`] makes them) for `receivers` receiving elements (which sets
     /// the shadow samples per element, see [`shadow_samples`]).
     pub fn new(patches: &'a Patches, receivers: usize) -> DirectLight<'a> {
+        let emitters = Emitters::new(patches);
         DirectLight {
             patches,
-            emitters: Emitters::new(patches),
+            groups: group_emitters(&emitters),
+            emitters,
             rays: RayScene::new(patches),
             samples: shadow_samples(receivers),
         }
@@ -210,52 +406,146 @@ impl<'a> DirectLight<'a> {
             .collect()
     }
 
+    /// Number of emitter groups (see [`EmitterGroup`]); at most the number of emitters.
+    pub fn group_count(&self) -> usize {
+        self.groups.len()
+    }
+
     /// Mean over the receiver of `sum_s E_s F(x <- s)` without visibility: the emitters' light
     /// arriving at its front side (H / pi), from the emitters' front sides, exact per point.
+    ///
+    /// A group wholly in front of the receiver's plane is integrated over its boundary
+    /// ([`contour_form_factor`]) at every receiver point that is clearly in front of all its
+    /// members; otherwise (a group cut by the receiver's plane, a point near the group's plane)
+    /// member by member.
     fn unoccluded(&self, r: &Element) -> [f64; 3] {
         let receiver = PatchGeom::new(r.corners, r.normal);
         let mut sum = [0.0f64; 3];
-        for (k, s) in self.emitters.geom.iter().enumerate() {
-            if self.emitters.patch[k] == r.patch {
+        for group in &self.groups {
+            if self.cannot_reach(r, &receiver, group) {
                 continue;
             }
-            // A receiver wholly behind (or in) the emitter's plane sees none of its front.
-            let size = receiver.size.max(s.size);
-            let tol = PLANE_EPS * size;
-            if r.corners
-                .iter()
-                .all(|&c| s.normal.dot(c - s.corners[0]) <= tol)
-            {
-                continue;
-            }
-            // The part of the emitter in front of the receiver's plane.
-            let (front, _) = geometry::clip_by_plane(&s.corners, r.corners[0], r.normal, tol);
-            if front.len == 0 {
-                continue;
-            }
-            let q = receiver_points(separation(&receiver, s));
-            let mut f = 0.0;
-            let mut add_point = |x: DVec3| {
-                if s.normal.dot(x - s.corners[0]) > 0.0 {
-                    for part in front.triangles() {
-                        f += geometry::point_form_factor(x, r.normal, &part);
-                    }
-                }
-            };
-            if q == 1 {
-                add_point(receiver.centroid);
+            let f = if group.members.len() > 1 && self.in_front_of_receiver(r, &receiver, group) {
+                self.group_form_factor(r, &receiver, group)
             } else {
-                for piece in geometry::subdivide(&r.corners, q) {
-                    add_point(geometry::centroid(&piece));
-                }
-            }
-            let f = f / (q * q) as f64;
-            let e = self.emitters.emission[k];
-            for c in 0..3 {
-                sum[c] += e[c] * f;
+                group
+                    .members
+                    .iter()
+                    .map(|&k| self.emitter_form_factor(r, &receiver, k as usize))
+                    .sum()
+            };
+            for (acc, e) in sum.iter_mut().zip(group.emission) {
+                *acc += e * f;
             }
         }
         sum
+    }
+
+    /// True when no light of `group` can reach the receiver's front: the group lies wholly
+    /// behind the receiver's plane, or the receiver wholly behind the group's (one-sided
+    /// emitters). A cheap, conservative test (bounding sphere, plane margins).
+    fn cannot_reach(&self, r: &Element, receiver: &PatchGeom, group: &EmitterGroup) -> bool {
+        let tol = PLANE_EPS * receiver.size.max(2.0 * group.radius);
+        if r.normal.dot(group.center - r.corners[0]) <= tol - group.radius {
+            return true;
+        }
+        r.corners.iter().all(|&c| {
+            let margin = group.normal_spread * ((c - group.center).length() + group.radius)
+                + group.thickness
+                + tol;
+            group.normal.dot(c - group.centroid) <= -margin
+        })
+    }
+
+    /// True when every vertex of `group` lies in the closed half-space in front of the
+    /// receiver's plane (within the clipping tolerance; a vertex on the plane is fine: the
+    /// contour sum, like the triangle form factor, only needs nothing behind the plane).
+    fn in_front_of_receiver(
+        &self,
+        r: &Element,
+        receiver: &PatchGeom,
+        group: &EmitterGroup,
+    ) -> bool {
+        let tol = PLANE_EPS * receiver.size.max(2.0 * group.radius);
+        let height = |p: DVec3| r.normal.dot(p - r.corners[0]);
+        height(group.center) >= group.radius || group.vertices.iter().all(|&v| height(v) >= -tol)
+    }
+
+    /// Mean form factor of a group seen from the receiver, whose plane has the whole group in
+    /// front of it: the same quadrature as member by member (each member's receiver points from
+    /// its own separation), computed as the contour sum at the receiver's centroid (every member
+    /// at one point) plus, for the few near members that need more points, their own
+    /// quadrature in place of their centroid value. Falls back to member by member when the
+    /// centroid is not clearly in front of every member.
+    fn group_form_factor(&self, r: &Element, receiver: &PatchGeom, group: &EmitterGroup) -> f64 {
+        let x = receiver.centroid;
+        let height = group.normal.dot(x - group.centroid);
+        let margin = group.normal_spread * ((x - group.center).length() + group.radius)
+            + group.thickness
+            + PLANE_EPS * group.radius;
+        if height <= margin {
+            return group
+                .members
+                .iter()
+                .map(|&k| self.emitter_form_factor(r, receiver, k as usize))
+                .sum();
+        }
+        let mut f = contour_form_factor(x, r.normal, &group.boundary);
+        for &k in &group.members {
+            let s = &self.emitters.geom[k as usize];
+            let q = receiver_points(separation(receiver, s));
+            if q == 1 {
+                continue;
+            }
+            let mut near = 0.0;
+            for piece in geometry::subdivide(&r.corners, q) {
+                let y = geometry::centroid(&piece);
+                if s.normal.dot(y - s.corners[0]) > 0.0 {
+                    near += geometry::point_form_factor(y, r.normal, &s.corners);
+                }
+            }
+            f += near / (q * q) as f64 - geometry::point_form_factor(x, r.normal, &s.corners);
+        }
+        f.max(0.0)
+    }
+
+    /// Mean form factor of emitter `k` seen from the receiver (the part of it in front of the
+    /// receiver's plane, at points in front of the emitter).
+    fn emitter_form_factor(&self, r: &Element, receiver: &PatchGeom, k: usize) -> f64 {
+        let s = &self.emitters.geom[k];
+        if self.emitters.patch[k] == r.patch {
+            return 0.0;
+        }
+        // A receiver wholly behind (or in) the emitter's plane sees none of its front.
+        let tol = PLANE_EPS * receiver.size.max(s.size);
+        if r.corners
+            .iter()
+            .all(|&c| s.normal.dot(c - s.corners[0]) <= tol)
+        {
+            return 0.0;
+        }
+        // The part of the emitter in front of the receiver's plane.
+        let (front, _) = geometry::clip_by_plane(&s.corners, r.corners[0], r.normal, tol);
+        if front.len == 0 {
+            return 0.0;
+        }
+        let q = receiver_points(separation(receiver, s));
+        let mut f = 0.0;
+        let mut add_point = |x: DVec3| {
+            if s.normal.dot(x - s.corners[0]) > 0.0 {
+                for part in front.triangles() {
+                    f += geometry::point_form_factor(x, r.normal, &part);
+                }
+            }
+        };
+        if q == 1 {
+            add_point(receiver.centroid);
+        } else {
+            for piece in geometry::subdivide(&r.corners, q) {
+                add_point(geometry::centroid(&piece));
+            }
+        }
+        f / (q * q) as f64
     }
 
     /// The fraction of the receiver's unoccluded direct light that shadow rays find visible,
@@ -425,4 +715,75 @@ pub fn solve_dense_direct(
         .collect();
     let radiance = add_emission(patches, &receivers, &patch_reflected);
     finish(patches, radiance, reflected.stats, options.clamp_negative)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::build_patches;
+    use crate::scene::Scene;
+    use crate::scenes;
+
+    /// A 1 x 1 emitter (facing down, split into 4 x 4 x 2 triangles so it forms one group)
+    /// over receivers in every relation to it: below, tilted, cutting its plane, beside it in its
+    /// plane, above it (behind), and touching its edge.
+    fn grouped_scene() -> Scene {
+        let v = DVec3::new;
+        let light = [
+            [v(0.0, 1.0, 0.0), v(1.0, 1.0, 0.0), v(1.0, 1.0, 1.0)],
+            [v(0.0, 1.0, 0.0), v(1.0, 1.0, 1.0), v(0.0, 1.0, 1.0)],
+        ];
+        let mut corners: Vec<[DVec3; 3]> = Vec::new();
+        let light_scene = scenes::subdivide(
+            &Scene::from_triangles(&light, &[[0.0; 3]; 2], &[[1.0; 3]; 2]),
+            4,
+        );
+        for t in 0..light_scene.len() {
+            corners.push(light_scene.corners(t));
+        }
+        let emitters = corners.len();
+        let receivers = [
+            [v(0.2, 0.0, 0.2), v(0.8, 0.0, 0.8), v(0.8, 0.0, 0.2)], // below, facing up
+            [v(-0.5, 0.2, 0.0), v(-0.5, 0.8, 1.0), v(-0.2, 0.0, 1.0)], // tilted, aside
+            [v(0.5, 0.5, 0.0), v(0.5, 1.5, 0.0), v(0.5, 0.5, 1.0)], // cuts the light's plane
+            [v(1.5, 1.0, 0.0), v(2.0, 1.0, 0.5), v(1.5, 1.0, 1.0)], // in its plane
+            [v(0.2, 1.5, 0.2), v(0.2, 1.5, 0.8), v(0.8, 1.5, 0.2)], // above (behind it)
+            [v(1.0, 1.0, 0.0), v(1.0, 0.0, 0.0), v(1.0, 1.0, 1.0)], // wall on its edge
+        ];
+        corners.extend(receivers);
+        let n = corners.len();
+        let mut emission = vec![[0.0; 3]; n];
+        emission[..emitters].fill([1.0; 3]);
+        Scene::from_triangles(&corners, &vec![[0.5; 3]; n], &emission)
+    }
+
+    #[test]
+    fn groups_give_the_sum_of_their_members() {
+        let scene = grouped_scene();
+        let patches = build_patches(&scene, None);
+        let light = DirectLight::new(&patches, patches.len());
+        assert_eq!(light.group_count(), 1, "the split light is one group");
+        assert_eq!(
+            light.groups[0].boundary.len(),
+            4 * 4,
+            "the square's rim, 4 x 4 edges"
+        );
+        for p in 0..patches.len() {
+            let r = Element {
+                corners: patches.corners[p],
+                normal: patches.normal[p],
+                area: patches.area[p],
+                patch: p as u32,
+            };
+            let receiver = PatchGeom::new(r.corners, r.normal);
+            let grouped = light.unoccluded(&r)[0];
+            let member_sum: f64 = (0..light.emitters.len())
+                .map(|k| light.emitter_form_factor(&r, &receiver, k))
+                .sum();
+            assert!(
+                (grouped - member_sum).abs() <= 1e-12 + 1e-9 * member_sum,
+                "patch {p}: grouped {grouped} vs members {member_sum}"
+            );
+        }
+    }
 }

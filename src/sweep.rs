@@ -348,7 +348,7 @@ impl SweepArgs {
             }
             _ => {}
         }
-        if self.time_axis == TimeAxis::Cpu && process_cpu_seconds().is_none() {
+        if self.time_axis == TimeAxis::Cpu && process_cpu_ticks().is_none() {
             return Err(Error::Parameter(
                 "--time-axis cpu needs /proc/self/stat (Linux); use --time-axis wall".into(),
             ));
@@ -434,10 +434,10 @@ impl RunResult {
     }
 }
 
-/// CPU time (user + system, all threads) this process has used so far, in seconds, from
-/// `/proc/self/stat` (fields 14 and 15, in clock ticks of 1/100 s: Linux's `USER_HZ` on every
-/// common architecture). `None` off Linux or when the file cannot be read. Resolution 10 ms.
-pub fn process_cpu_seconds() -> Option<f64> {
+/// CPU time (user + system, all threads) this process has used so far, in clock ticks of
+/// 1/100 s (Linux's `USER_HZ` on every common architecture), from `/proc/self/stat` (fields 14
+/// and 15). `None` off Linux or when the file cannot be read.
+pub fn process_cpu_ticks() -> Option<u64> {
     let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
     // The command name (field 2) is in parentheses and may hold spaces: split after it.
     let rest = &stat[stat.rfind(')')? + 1..];
@@ -445,7 +445,16 @@ pub fn process_cpu_seconds() -> Option<f64> {
     // `fields[0]` is field 3 (state), so field n is `fields[n - 3]`.
     let utime: u64 = fields.get(11)?.parse().ok()?;
     let stime: u64 = fields.get(12)?.parse().ok()?;
-    Some((utime + stime) as f64 / 100.0)
+    Some(utime + stime)
+}
+
+/// Seconds of CPU time between two readings of [`process_cpu_ticks`] (resolution 10 ms; equal
+/// tick counts give bit-identical seconds).
+fn cpu_seconds_between(before: Option<u64>, after: Option<u64>) -> Option<f64> {
+    match (before, after) {
+        (Some(a), Some(b)) => Some(b.saturating_sub(a) as f64 / 100.0),
+        _ => None,
+    }
 }
 
 /// For points (seconds, error), true where no other point is at least as good in both and
@@ -526,14 +535,11 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
     let mut results: Vec<RunResult> = Vec::with_capacity(total);
     for round in 0..args.repeat {
         for (i, spec) in runs.iter().enumerate() {
-            let cpu_before = process_cpu_seconds();
+            let cpu_before = process_cpu_ticks();
             let (solution, seconds, delta) = driver::measured(&mut overall_peak, || {
                 driver::run_solver(args.solver, &loaded.patches, &spec.options, args.quiet)
             });
-            let cpu_seconds = match (cpu_before, process_cpu_seconds()) {
-                (Some(a), Some(b)) => Some((b - a).max(0.0)),
-                _ => None,
-            };
+            let cpu_seconds = cpu_seconds_between(cpu_before, process_cpu_ticks());
             if round > 0 {
                 let r = &mut results[i];
                 r.seconds = r.seconds.min(seconds);
