@@ -141,7 +141,8 @@ impl Prepared {
             prepared.elem_albedo.push(patches.albedo[n.patch as usize]);
             prepared.elem_patch.push(n.patch);
         }
-        prepared.groups = SenderGroups::build(&prepared.tree, &prepared.elem_area, &prepared.elem_normal);
+        prepared.groups =
+            SenderGroups::build(&prepared.tree, &prepared.elem_area, &prepared.elem_normal);
         prepared
     }
 
@@ -165,12 +166,16 @@ impl Prepared {
     /// The elements, in the order of [`ElementState`] and of `elem_source` in
     /// [`Prepared::solve_with_source`].
     pub fn elements(&self) -> impl ExactSizeIterator<Item = Element> + '_ {
-        self.tree.elements.iter().enumerate().map(|(e, &node)| Element {
-            corners: self.tree.nodes[node as usize].corners,
-            normal: self.elem_normal[e],
-            area: self.elem_area[e],
-            patch: self.elem_patch[e],
-        })
+        self.tree
+            .elements
+            .iter()
+            .enumerate()
+            .map(|(e, &node)| Element {
+                corners: self.tree.nodes[node as usize].corners,
+                normal: self.elem_normal[e],
+                area: self.elem_area[e],
+                patch: self.elem_patch[e],
+            })
     }
 
     /// Solves with the patches' own emission.
@@ -362,7 +367,11 @@ impl Prepared {
             if iteration == 1 {
                 stats.max_row_sum = sums.max_row;
             }
-            let change = if sums.den > 0.0 { sums.num / sums.den } else { 0.0 };
+            let change = if sums.den > 0.0 {
+                sums.num / sums.den
+            } else {
+                0.0
+            };
             std::mem::swap(&mut radiance, &mut next_radiance);
             std::mem::swap(&mut anti, &mut next_anti);
             stats.iterations = iteration;
@@ -467,7 +476,10 @@ impl SenderGroups {
         if tree.nodes.is_empty() {
             return groups;
         }
-        let maxe: u32 = std::env::var("AR_PULLMAX").ok().and_then(|s| s.parse().ok()).unwrap_or(PULL_PER_ELEMENT_MAX);
+        let maxe: u32 = std::env::var("AR_PULLMAX")
+            .ok()
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(PULL_PER_ELEMENT_MAX);
         let large = |i: u32| {
             let (e0, e1) = tree.nodes[i as usize].elements;
             e1 - e0 > maxe
@@ -538,17 +550,22 @@ impl SenderGroups {
                 let mut cell_keys: Vec<usize> = Vec::new();
                 for (_, n, _) in &inputs {
                     let cell = cells.bin_of(*n);
-                    let k = cell_keys.iter().position(|&c| c == cell).unwrap_or_else(|| {
-                        cell_keys.push(cell);
-                        cell_keys.len() - 1
-                    });
+                    let k = cell_keys
+                        .iter()
+                        .position(|&c| c == cell)
+                        .unwrap_or_else(|| {
+                            cell_keys.push(cell);
+                            cell_keys.len() - 1
+                        });
                     key_of.push(k);
                 }
                 cell_keys.len()
             };
             let first = groups.normal.len() as u32;
             groups.range[i as usize] = (first, first + count as u32);
-            groups.normal.extend(std::iter::repeat_n(DVec3::ZERO, count));
+            groups
+                .normal
+                .extend(std::iter::repeat_n(DVec3::ZERO, count));
             groups.area.extend(std::iter::repeat_n(0.0, count));
             groups.parent_group.extend(std::iter::repeat_n(NONE, count));
             // Wire the inputs; group normals are area-weighted means.
@@ -623,13 +640,10 @@ impl SenderGroups {
                 for c in 0..3 {
                     group_b[p][c] += group_b[g][c];
                 }
-                let (src, dst) = if p < g {
-                    let (lo, hi) = group_a.split_at_mut(g * nb);
-                    (&hi[..nb], &mut lo[p * nb..(p + 1) * nb])
-                } else {
-                    let (lo, hi) = group_a.split_at_mut(p * nb);
-                    (&lo[g * nb..(g + 1) * nb], &mut hi[..nb])
-                };
+                // Parents' groups are allocated after their children's (post-order).
+                debug_assert!(p > g);
+                let (lo, hi) = group_a.split_at_mut(p * nb);
+                let (src, dst) = (&lo[g * nb..(g + 1) * nb], &mut hi[..nb]);
                 for (d, s) in dst.iter_mut().zip(src) {
                     for c in 0..3 {
                         d[c] += s[c];
@@ -723,12 +737,14 @@ fn extrapolate<const C: usize, T>(x: &mut [[T; C]], x_previous: &[[T; C]], k: f6
 where
     T: Copy + Into<f64> + FromF64 + Send + Sync,
 {
-    x.par_iter_mut().zip(x_previous.par_iter()).for_each(|(a, b)| {
-        for c in 0..C {
-            let (v, p): (f64, f64) = (a[c].into(), b[c].into());
-            a[c] = T::from_f64(v + k * (v - p));
-        }
-    });
+    x.par_iter_mut()
+        .zip(x_previous.par_iter())
+        .for_each(|(a, b)| {
+            for c in 0..C {
+                let (v, p): (f64, f64) = (a[c].into(), b[c].into());
+                a[c] = T::from_f64(v + k * (v - p));
+            }
+        });
 }
 
 /// Conversion back from f64 for [`extrapolate`].
