@@ -89,7 +89,7 @@ pub fn solve_dense(patches: &Patches, options: &SolverOptions, progress: &Progre
                     row += gather_entries(
                         entries,
                         radiance[s],
-                        &anti[s * nb..(s + 1) * nb],
+                        |bin| anti[s * nb + bin].map(f64::from),
                         options.antiradiance,
                         params.two_sided,
                         &mut h,

@@ -19,6 +19,7 @@ use crate::bins::Bins;
 use crate::hierarchy::{ClusterTree, NONE};
 use crate::links::{self, ClusterLink, LinkParams, Links};
 use crate::mesh::Patches;
+use crate::model::{self, ModelStats};
 use crate::progress::Progress;
 use crate::solution::{Solution, SolveStats};
 use crate::solve::{finish, Convergence, SolverOptions};
@@ -31,6 +32,8 @@ pub struct HierarchyTimings {
     pub tree: f64,
     /// Link refinement including exact couplings.
     pub links: f64,
+    /// Deciding what to model: grey and convexity tests, the bins each element stores.
+    pub model: f64,
     /// All iterations.
     pub iterate: f64,
 }
@@ -52,6 +55,16 @@ pub struct Prepared {
     elem_patch: Vec<u32>,
     /// Normal groups of the large nodes, for the pull.
     groups: SenderGroups,
+    /// The antiradiance bins each element stores.
+    live: LiveBins,
+    /// Cached geometric factors of the (element, cluster link) pairs, when they fit the budget.
+    pairs: Option<PairCache>,
+    /// True when every albedo is grey (a grey source is then solved in one channel).
+    albedo_grey: bool,
+    /// True when the scene is a convex enclosure ([`model::is_convex_enclosure`]).
+    convex: bool,
+    /// True when antiradiance is propagated: asked for and the scene is not convex.
+    use_anti: bool,
     /// Solver options the links were refined for.
     pub options: SolverOptions,
     /// Build timings.
@@ -65,14 +78,39 @@ pub struct Prepared {
 pub struct ElementState {
     /// Outgoing radiance per element, RGB (normalized units).
     radiance: Vec<[f64; 3]>,
-    /// Antiradiance per element and bin, RGB.
-    anti: Vec<[f32; 3]>,
+    /// Antiradiance per stored (element, bin) slot, `channels` values each.
+    anti: Vec<f32>,
+    /// Colour channels of `anti`: 1 (grey solve) or 3.
+    channels: usize,
 }
+
+/// Radiance per element and antiradiance per stored slot, in `C` channels.
+type ChannelState<const C: usize> = (Vec<[f64; C]>, Vec<[f32; C]>);
 
 impl ElementState {
     /// Outgoing radiance per element (normalized units, element order of [`Prepared`]).
     pub fn radiance(&self) -> &[[f64; 3]] {
         &self.radiance
+    }
+
+    /// The state in `C` channels, or `None` when it does not belong to a scene with `n`
+    /// elements and `slots` stored antiradiance bins. Grey to RGB repeats the channel; RGB to
+    /// grey takes the mean.
+    fn to_channels<const C: usize>(&self, n: usize, slots: usize) -> Option<ChannelState<C>> {
+        let k = self.channels;
+        if self.radiance.len() != n || k == 0 || self.anti.len() != slots * k {
+            return None;
+        }
+        let radiance = self.radiance.iter().map(|&b| channels_of(b)).collect();
+        let anti = self
+            .anti
+            .chunks_exact(k)
+            .map(|a| {
+                let rgb = [a[0], a[1 % k], a[2 % k]].map(f64::from);
+                channels_of::<C>(rgb).map(|x| x as f32)
+            })
+            .collect();
+        Some((radiance, anti))
     }
 }
 
@@ -121,6 +159,11 @@ impl Prepared {
             elem_albedo: Vec::with_capacity(tree.elements.len()),
             elem_patch: Vec::with_capacity(tree.elements.len()),
             groups: SenderGroups::default(),
+            live: LiveBins::default(),
+            pairs: None,
+            albedo_grey: true,
+            convex: false,
+            use_anti: options.antiradiance,
             tree,
             links,
             bins,
@@ -128,6 +171,7 @@ impl Prepared {
             timings: HierarchyTimings {
                 tree: (t1 - t0).as_secs_f64(),
                 links: (t2 - t1).as_secs_f64(),
+                model: 0.0,
                 iterate: 0.0,
             },
         };
@@ -143,6 +187,18 @@ impl Prepared {
         }
         prepared.groups =
             SenderGroups::build(&prepared.tree, &prepared.elem_area, &prepared.elem_normal);
+        // Model only what the scene needs: grey albedos allow one-channel solves; a convex
+        // enclosure needs no antiradiance; each element stores only the bins links use.
+        prepared.albedo_grey = prepared.elem_albedo.iter().all(|&a| model::is_grey(a));
+        prepared.convex = model::is_convex_enclosure(&prepared.tree);
+        prepared.use_anti = options.antiradiance && !prepared.convex;
+        prepared.pairs = PairCache::build(&prepared, options.pair_cache_mb as u64 * 1_000_000);
+        prepared.live = if prepared.use_anti {
+            LiveBins::build(&prepared)
+        } else {
+            LiveBins::empty(prepared.element_count(), prepared.bins.len())
+        };
+        prepared.timings.model = t2.elapsed().as_secs_f64();
         prepared
     }
 
@@ -151,14 +207,21 @@ impl Prepared {
         self.elem_area.len()
     }
 
-    /// Bytes held by tree, links and per-sweep arrays.
+    /// Bytes held by tree, links and per-sweep arrays (three channels).
     pub fn bytes(&self) -> u64 {
+        self.static_bytes() + self.state_bytes(3)
+    }
+
+    /// Bytes held by tree, links, element arrays and per-link and per-group sweep sums (three
+    /// channels), without the per-element sweep state.
+    fn static_bytes(&self) -> u64 {
         let n = self.element_count() as u64;
         let nb = self.bins.len() as u64;
         self.links.bytes()
             + (self.tree.nodes.len() * std::mem::size_of::<crate::hierarchy::Node>()) as u64
-            + n * (8 + 24 + 24 + 4)
-            + 2 * n * (24 + nb * 12)
+            + n * (8 + 24 + 24 + 24 + 4)
+            + self.live.bytes()
+            + self.pairs.as_ref().map_or(0, PairCache::bytes)
             + self.links.cluster.len() as u64 * 24
             + self.groups.bytes(nb)
     }
@@ -211,7 +274,10 @@ impl Prepared {
     /// units, element order of [`Prepared::elements`]). With the emission as the source this is
     /// the usual solve; with the reflected direct light as the source it gives the indirect
     /// part on top of exact direct lighting. Warm-starts from `warm` when it belongs to this
-    /// scene (same element and bin count), else starts from the source.
+    /// scene (same element count and stored bins), else starts from the source.
+    ///
+    /// Solves one channel when the albedos and the source are grey, three otherwise
+    /// ([`crate::model`]); the returned solution is RGB either way.
     ///
     /// # Panics
     /// When `elem_source.len() != self.element_count()`.
@@ -222,48 +288,79 @@ impl Prepared {
         warm: Option<&ElementState>,
         progress: &Progress,
     ) -> (Solution, ElementState) {
+        assert_eq!(elem_source.len(), self.element_count());
+        let grey = self.albedo_grey && elem_source.iter().all(|s| model::is_grey(*s));
+        if grey {
+            self.solve_channels::<1>(patches, elem_source, warm, progress)
+        } else {
+            self.solve_channels::<3>(patches, elem_source, warm, progress)
+        }
+    }
+
+    /// Bytes of the per-sweep state with `channels` colour channels.
+    fn state_bytes(&self, channels: u64) -> u64 {
+        let n = self.element_count() as u64;
+        2 * (n * 8 * channels + self.live.slots() as u64 * 4 * channels)
+    }
+
+    /// [`Prepared::solve_with_source`] in `C` colour channels (1 or 3).
+    fn solve_channels<const C: usize>(
+        &mut self,
+        patches: &Patches,
+        elem_source: &[[f64; 3]],
+        warm: Option<&ElementState>,
+        progress: &Progress,
+    ) -> (Solution, ElementState) {
         let t0 = Instant::now();
         let options = &self.options;
         let nb = self.bins.len();
         let n = self.element_count();
-        assert_eq!(elem_source.len(), n);
         let two_sided = options.two_sided;
-        let use_anti = options.antiradiance;
-        let emission = elem_source;
-        let (mut radiance, mut anti) = match warm {
-            Some(w) if w.radiance.len() == n && w.anti.len() == n * nb => {
-                (w.radiance.clone(), w.anti.clone())
-            }
-            _ => (emission.to_vec(), vec![[0.0f32; 3]; n * nb]),
-        };
+        let use_anti = self.use_anti;
+        let live = &self.live;
+        let slots = live.slots();
+        let emission: Vec<[f64; C]> = elem_source.iter().map(|&s| channels_of(s)).collect();
+        let albedo: Vec<[f64; C]> = self.elem_albedo.iter().map(|&a| channels_of(a)).collect();
+        let (mut radiance, mut anti) = warm
+            .and_then(|w| w.to_channels::<C>(n, slots))
+            .unwrap_or_else(|| (emission.clone(), vec![[0.0f32; C]; slots]));
         let mut next_radiance = radiance.clone();
         let mut next_anti = anti.clone();
-        let mut intensity = vec![[0.0f64; 3]; self.links.cluster.len()];
+        let mut intensity = vec![[0.0f64; C]; self.links.cluster.len()];
+        // Three channels and every bin of every element, against what this solve stores.
+        let full_bytes = 2 * (n as u64 * 24 + (n * nb) as u64 * 12);
+        let used_bytes = self.state_bytes(C as u64);
         let mut stats = SolveStats {
             links: self.links.len() as u64,
-            solver_bytes: self.bytes(),
+            solver_bytes: self.static_bytes() + used_bytes,
+            model: Some(ModelStats {
+                channels: C,
+                antiradiance: use_anti,
+                convex_enclosure: self.convex,
+                anti_bins_stored: slots as u64,
+                anti_bins_full: (n * nb) as u64,
+                bytes_saved: full_bytes.saturating_sub(used_bytes),
+            }),
             ..SolveStats::default()
         };
         let mut convergence = Convergence::default();
         let tree = &self.tree;
         let links = &self.links;
         let bins = &self.bins;
-        let (elem_area, elem_normal, elem_albedo, elem_center) = (
-            &self.elem_area,
-            &self.elem_normal,
-            &self.elem_albedo,
-            &self.elem_center,
-        );
+        let (elem_area, elem_normal, elem_center) =
+            (&self.elem_area, &self.elem_normal, &self.elem_center);
 
-        let inv_pi = 1.0 / std::f64::consts::PI;
         let groups = &self.groups;
-        let mut group_b = vec![[0.0f64; 3]; groups.normal.len()];
-        let mut group_a = vec![[0.0f64; 3]; groups.normal.len() * nb];
+        let mut group_b = vec![[0.0f64; C]; groups.normal.len()];
+        let mut group_a = vec![[0.0f64; C]; groups.normal.len() * nb];
+        let pairs = self.pairs.as_ref();
         let ctx = SweepContext {
             tree,
             bins,
+            live,
             elem_area,
             elem_normal,
+            elem_center,
             use_anti,
             two_sided,
         };
@@ -271,7 +368,15 @@ impl Prepared {
         for iteration in 1..=options.max_iterations {
             // 1. Sender summaries: per normal group of every large node, the area-weighted sums of
             //    B and of each antiradiance bin (bottom-up, children before parents).
-            groups.accumulate(&radiance, &anti, elem_area, nb, &mut group_b, &mut group_a);
+            groups.accumulate(
+                &radiance,
+                &anti,
+                live,
+                elem_area,
+                nb,
+                &mut group_b,
+                &mut group_a,
+            );
 
             // 2. Pull: the radiant intensity every cluster link's sender sends along the link.
             intensity
@@ -284,77 +389,77 @@ impl Prepared {
             // 3. Gather per element: exact links, then the cluster links into it and its ancestors,
             //    each with the element's own direction and distance from the link's sender (the
             //    antiradiance goes to the link's bin, the one its sender reads when it passes it on).
+            //    Only the element's stored bins are kept.
+            let anti_out = split_by_start(&mut next_anti, &live.start);
             let change_parts: Vec<(f64, f64, f64)> = next_radiance
                 .par_iter_mut()
-                .zip(next_anti.par_chunks_mut(nb))
+                .zip(anti_out.into_par_iter())
                 .enumerate()
-                .map(|(e, (b_out, a_out))| {
-                    let mut h = [0.0f64; 3];
-                    let mut a_acc = vec![[0.0f64; 3]; nb];
-                    let mut row = 0.0;
-                    for l in links.exact_start[e]..links.exact_start[e + 1] {
-                        let s = links.exact_sender[l as usize] as usize;
-                        let entries = &links.exact_entries[links.exact_entry_start[l as usize]
-                            as usize
-                            ..links.exact_entry_start[l as usize + 1] as usize];
-                        row += gather_entries(
-                            entries,
-                            radiance[s],
-                            &anti[s * nb..(s + 1) * nb],
-                            use_anti,
-                            two_sided,
-                            &mut h,
-                            &mut a_acc,
-                        );
-                    }
-                    let n_e = elem_normal[e];
-                    let x_e = elem_center[e];
-                    let mut node = tree.elements[e];
-                    while node != NONE {
-                        let range = links.cluster_start[node as usize] as usize
-                            ..links.cluster_start[node as usize + 1] as usize;
-                        for (l, i) in links.cluster[range.clone()].iter().zip(&intensity[range]) {
-                            // This element's own direction and distance from the sender.
-                            let v = x_e
-                                - DVec3::new(
-                                    l.origin[0] as f64,
-                                    l.origin[1] as f64,
-                                    l.origin[2] as f64,
-                                );
-                            let d2 = v.length_squared();
-                            if !(d2 > 0.0) {
-                                continue;
-                            }
-                            let w = v / d2.sqrt();
-                            let cos = -n_e.dot(w);
-                            let g = 1.0 / (d2 + l.spread as f64);
-                            if cos > 0.0 {
-                                let k = cos * g * inv_pi;
-                                for c in 0..3 {
-                                    h[c] += k * i[c];
-                                }
-                            }
-                            if use_anti && (cos > 0.0 || two_sided) {
-                                let bin = l.bin as usize;
-                                let k = g / bins.solid_angle[bin];
-                                for c in 0..3 {
-                                    a_acc[bin][c] += k * i[c];
-                                }
-                            }
+                .map_init(
+                    || vec![[0.0f64; C]; nb],
+                    |a_acc, (e, (b_out, a_out))| {
+                        a_acc.fill([0.0; C]);
+                        let mut h = [0.0f64; C];
+                        let mut row = 0.0;
+                        for l in links.exact_start[e]..links.exact_start[e + 1] {
+                            let s = links.exact_sender[l as usize] as usize;
+                            let entries = &links.exact_entries[links.exact_entry_start[l as usize]
+                                as usize
+                                ..links.exact_entry_start[l as usize + 1] as usize];
+                            row += gather_entries(
+                                entries,
+                                radiance[s],
+                                |bin| {
+                                    live.slot(s, bin)
+                                        .map_or([0.0; C], |k| anti[k].map(f64::from))
+                                },
+                                use_anti,
+                                two_sided,
+                                &mut h,
+                                a_acc,
+                            );
                         }
-                        node = tree.nodes[node as usize].parent;
-                    }
-                    for c in 0..3 {
-                        b_out[c] = emission[e][c] + elem_albedo[e][c] * h[c];
-                    }
-                    for (dst, src) in a_out.iter_mut().zip(&a_acc) {
-                        *dst = src.map(|x| x as f32);
-                    }
-                    let a = elem_area[e];
-                    let num: f64 = (0..3).map(|c| a * (b_out[c] - radiance[e][c]).abs()).sum();
-                    let den: f64 = (0..3).map(|c| a * b_out[c].abs()).sum();
-                    (num, den, row)
-                })
+                        let mut add = |l: &ClusterLink, i: &[f64; C], k: PairFactor| {
+                            for c in 0..C {
+                                h[c] += k.irradiance as f64 * i[c];
+                            }
+                            if k.anti != 0.0 {
+                                let bin = l.bin as usize;
+                                for c in 0..C {
+                                    a_acc[bin][c] += k.anti as f64 * i[c];
+                                }
+                            }
+                        };
+                        match pairs {
+                            Some(cache) => {
+                                let mut k = cache.start[e] as usize;
+                                let mut node = tree.elements[e];
+                                while node != NONE {
+                                    let range = links.cluster_start[node as usize] as usize
+                                        ..links.cluster_start[node as usize + 1] as usize;
+                                    for (l, i) in
+                                        links.cluster[range.clone()].iter().zip(&intensity[range])
+                                    {
+                                        add(l, i, cache.factor[k]);
+                                        k += 1;
+                                    }
+                                    node = tree.nodes[node as usize].parent;
+                                }
+                            }
+                            None => ctx.for_each_pair(e, links, |i, l, k| add(l, &intensity[i], k)),
+                        }
+                        for c in 0..C {
+                            b_out[c] = emission[e][c] + albedo[e][c] * h[c];
+                        }
+                        for (dst, bin) in a_out.iter_mut().zip(live.bins_of(e)) {
+                            *dst = a_acc[bin].map(|x| x as f32);
+                        }
+                        let a = elem_area[e];
+                        let num: f64 = (0..C).map(|c| a * (b_out[c] - radiance[e][c]).abs()).sum();
+                        let den: f64 = (0..C).map(|c| a * b_out[c].abs()).sum();
+                        (num, den, row)
+                    },
+                )
                 .collect();
 
             let sums = change_parts.iter().fold(SweepSums::default(), |acc, p| {
@@ -390,15 +495,16 @@ impl Prepared {
         }
         stats.residual = convergence.residual;
 
-        // Elements -> patches (area-weighted mean); patches without elements (inactive) get 0
-        // here and their emission from `solve_with_emission`.
+        // Elements -> patches (area-weighted mean, RGB); patches without elements (inactive) get
+        // 0 here and their emission from `solve_with_emission`.
+        let radiance_rgb: Vec<[f64; 3]> = radiance.iter().map(|&b| rgb_of(b)).collect();
         let mut patch_sum = vec![[0.0f64; 3]; patches.len()];
         let mut patch_area = vec![0.0f64; patches.len()];
         for e in 0..n {
             let p = self.elem_patch[e] as usize;
             patch_area[p] += elem_area[e];
             for c in 0..3 {
-                patch_sum[p][c] += elem_area[e] * radiance[e][c];
+                patch_sum[p][c] += elem_area[e] * radiance_rgb[e][c];
             }
         }
         let patch_radiance: Vec<[f64; 3]> = (0..patches.len())
@@ -411,9 +517,44 @@ impl Prepared {
             })
             .collect();
         self.timings.iterate = t0.elapsed().as_secs_f64();
+        stats.stage_seconds = Some(self.timings.clone());
         let solution = finish(patches, patch_radiance, stats, options.clamp_negative);
-        (solution, ElementState { radiance, anti })
+        let state = ElementState {
+            radiance: radiance_rgb,
+            anti: anti.iter().flatten().copied().collect(),
+            channels: C,
+        };
+        (solution, state)
     }
+}
+
+/// The `C` channels (3: RGB as is; 1: the mean) of an RGB triple.
+fn channels_of<const C: usize>(rgb: [f64; 3]) -> [f64; C] {
+    if C == 3 {
+        std::array::from_fn(|c| rgb[c])
+    } else {
+        [(rgb[0] + rgb[1] + rgb[2]) / 3.0; C]
+    }
+}
+
+/// RGB from `C` channels (1: grey, repeated).
+fn rgb_of<const C: usize>(x: [f64; C]) -> [f64; 3] {
+    std::array::from_fn(|c| x[c % C])
+}
+
+/// Splits `data` into consecutive pieces of lengths `start[i + 1] - start[i]`.
+fn split_by_start<'a, T, I: Copy + Into<u64>>(
+    mut data: &'a mut [T],
+    start: &[I],
+) -> Vec<&'a mut [T]> {
+    let mut out = Vec::with_capacity(start.len().saturating_sub(1));
+    for w in start.windows(2) {
+        let len = (w[1].into() - w[0].into()) as usize;
+        let (head, tail) = std::mem::take(&mut data).split_at_mut(len);
+        out.push(head);
+        data = tail;
+    }
+    out
 }
 
 /// Solves the scene with the hierarchical solver. Preconditions: `options.validate()` passed.
@@ -603,29 +744,32 @@ impl SenderGroups {
 
     /// Area-weighted sums of B (`group_b`) and of every antiradiance bin (`group_a`) per group:
     /// elements into their lowest large ancestor's groups, then groups into their parents'.
-    fn accumulate(
+    #[allow(clippy::too_many_arguments)]
+    fn accumulate<const C: usize>(
         &self,
-        radiance: &[[f64; 3]],
-        anti: &[[f32; 3]],
+        radiance: &[[f64; C]],
+        anti: &[[f32; C]],
+        live: &LiveBins,
         elem_area: &[f64],
         nb: usize,
-        group_b: &mut [[f64; 3]],
-        group_a: &mut [[f64; 3]],
+        group_b: &mut [[f64; C]],
+        group_a: &mut [[f64; C]],
     ) {
-        group_b.fill([0.0; 3]);
-        group_a.fill([0.0; 3]);
+        group_b.fill([0.0; C]);
+        group_a.fill([0.0; C]);
         for (e, &g) in self.elem_group.iter().enumerate() {
             if g == NONE {
                 continue;
             }
             let (g, a) = (g as usize, elem_area[e]);
-            for c in 0..3 {
+            for c in 0..C {
                 group_b[g][c] += a * radiance[e][c];
             }
             let dst = &mut group_a[g * nb..(g + 1) * nb];
-            for (d, s) in dst.iter_mut().zip(&anti[e * nb..(e + 1) * nb]) {
-                for c in 0..3 {
-                    d[c] += a * s[c] as f64;
+            let stored = &anti[live.start[e] as usize..live.start[e + 1] as usize];
+            for (bin, s) in live.bins_of(e).zip(stored) {
+                for c in 0..C {
+                    dst[bin][c] += a * s[c] as f64;
                 }
             }
         }
@@ -637,15 +781,16 @@ impl SenderGroups {
                     continue;
                 }
                 let p = p as usize;
-                for c in 0..3 {
-                    group_b[p][c] += group_b[g][c];
+                let child = group_b[g];
+                for (d, s) in group_b[p].iter_mut().zip(child) {
+                    *d += s;
                 }
                 // Parents' groups are allocated after their children's (post-order).
                 debug_assert!(p > g);
                 let (lo, hi) = group_a.split_at_mut(p * nb);
                 let (src, dst) = (&lo[g * nb..(g + 1) * nb], &mut hi[..nb]);
                 for (d, s) in dst.iter_mut().zip(src) {
-                    for c in 0..3 {
+                    for c in 0..C {
                         d[c] += s[c];
                     }
                 }
@@ -676,37 +821,91 @@ impl SweepSums {
 struct SweepContext<'a> {
     tree: &'a ClusterTree,
     bins: &'a Bins,
+    live: &'a LiveBins,
     elem_area: &'a [f64],
     elem_normal: &'a [DVec3],
+    elem_center: &'a [DVec3],
     use_anti: bool,
     two_sided: bool,
 }
 
 impl SweepContext<'_> {
+    /// Calls `f` with the index of every cluster link into element `e` or one of its ancestors (element
+    /// first, then up the tree; links of a node in stored order) and the pair's factors.
+    #[inline]
+    fn for_each_pair(
+        &self,
+        e: usize,
+        links: &Links,
+        mut f: impl FnMut(usize, &ClusterLink, PairFactor),
+    ) {
+        let (n_e, x_e) = (self.elem_normal[e], self.elem_center[e]);
+        let mut node = self.tree.elements[e];
+        while node != NONE {
+            let range = links.cluster_start[node as usize] as usize
+                ..links.cluster_start[node as usize + 1] as usize;
+            for (i, l) in range.clone().zip(&links.cluster[range]) {
+                f(i, l, self.pair_factor(l, n_e, x_e));
+            }
+            node = self.tree.nodes[node as usize].parent;
+        }
+    }
+
+    /// What a cluster link gives an element with normal `n_e` at `x_e`: irradiance
+    /// `max(0, cos) / (pi (d^2 + spread))` per unit of the link's intensity, with the element's
+    /// own direction and distance from the sender, and antiradiance `1 / ((d^2 + spread)
+    /// Omega_bin)` in the link's bin where the light arrives at a side that creates it.
+    #[inline]
+    fn pair_factor(&self, l: &ClusterLink, n_e: DVec3, x_e: DVec3) -> PairFactor {
+        let origin = DVec3::new(l.origin[0] as f64, l.origin[1] as f64, l.origin[2] as f64);
+        let v = x_e - origin;
+        let d2 = v.length_squared();
+        if !(d2 > 0.0) {
+            return PairFactor::default();
+        }
+        let cos = -n_e.dot(v) / d2.sqrt();
+        let g = 1.0 / (d2 + l.spread as f64);
+        let irradiance = if cos > 0.0 {
+            cos * g * std::f64::consts::FRAC_1_PI
+        } else {
+            0.0
+        };
+        let anti = if self.use_anti && (cos > 0.0 || self.two_sided) {
+            g / self.bins.solid_angle[l.bin as usize]
+        } else {
+            0.0
+        };
+        PairFactor {
+            irradiance: irradiance as f32,
+            anti: anti as f32,
+        }
+    }
+
     /// The radiant intensity a cluster link's sender sends along the link: B through the front of
     /// every element, minus antiradiance through the back (both sides when two-sided).
-    fn pull(
+    #[allow(clippy::needless_range_loop)]
+    fn pull<const C: usize>(
         &self,
         l: &ClusterLink,
         groups: &SenderGroups,
-        group_b: &[[f64; 3]],
-        group_a: &[[f64; 3]],
-        radiance: &[[f64; 3]],
-        anti: &[[f32; 3]],
-    ) -> [f64; 3] {
+        group_b: &[[f64; C]],
+        group_a: &[[f64; C]],
+        radiance: &[[f64; C]],
+        anti: &[[f32; C]],
+    ) -> [f64; C] {
         let nb = self.bins.len();
         let w = DVec3::new(l.w[0] as f64, l.w[1] as f64, l.w[2] as f64);
         let bin = l.bin as usize;
-        let mut acc = [0.0f64; 3];
-        let mut add = |cos: f64, b: [f64; 3], a: [f64; 3]| {
+        let mut acc = [0.0f64; C];
+        let mut add = |cos: f64, b: [f64; C], a: [f64; C]| {
             if cos > 0.0 {
-                for c in 0..3 {
+                for c in 0..C {
                     acc[c] += cos * b[c];
                 }
             }
             if self.use_anti && (self.two_sided || cos < 0.0) {
                 let k = cos.abs();
-                for c in 0..3 {
+                for c in 0..C {
                     acc[c] -= k * a[c];
                 }
             }
@@ -720,15 +919,237 @@ impl SweepContext<'_> {
             let (e0, e1) = self.tree.nodes[l.sender as usize].elements;
             for e in e0 as usize..e1 as usize {
                 let a = self.elem_area[e];
-                let a_e = anti[e * nb + bin];
-                add(
-                    self.elem_normal[e].dot(w),
-                    radiance[e].map(|x| a * x),
-                    [a * a_e[0] as f64, a * a_e[1] as f64, a * a_e[2] as f64],
-                );
+                let a_e = self
+                    .live
+                    .slot(e, bin)
+                    .map_or([0.0; C], |k| anti[k].map(|x| a * x as f64));
+                add(self.elem_normal[e].dot(w), radiance[e].map(|x| a * x), a_e);
             }
         }
         acc
+    }
+}
+
+/// The geometric factors of one (receiving element, cluster link) pair
+/// ([`SweepContext::pair_factor`]).
+#[derive(Clone, Copy, Debug, Default)]
+struct PairFactor {
+    /// Irradiance per unit of the link's intensity.
+    irradiance: f32,
+    /// Antiradiance in the link's bin per unit of the link's intensity (0 when none is created).
+    anti: f32,
+}
+
+/// The factors of every (element, cluster link) pair, per element in the order of
+/// [`SweepContext::for_each_pair`]: element `e`'s pairs are `factor[start[e] .. start[e + 1]]`.
+#[derive(Clone, Debug, Default)]
+struct PairCache {
+    start: Vec<u64>,
+    factor: Vec<PairFactor>,
+}
+
+impl PairCache {
+    /// The cache for `prepared` (tree, links, element arrays and `use_anti` set), or `None` when
+    /// it would take more than `budget` bytes.
+    fn build(prepared: &Prepared, budget: u64) -> Option<PairCache> {
+        let (tree, links) = (&prepared.tree, &prepared.links);
+        let n = prepared.element_count();
+        let count = |e: usize| {
+            let mut total = 0usize;
+            let mut node = tree.elements[e];
+            while node != NONE {
+                total += (links.cluster_start[node as usize + 1]
+                    - links.cluster_start[node as usize]) as usize;
+                node = tree.nodes[node as usize].parent;
+            }
+            total
+        };
+        let counts: Vec<usize> = (0..n).into_par_iter().map(count).collect();
+        let total: usize = counts.iter().sum();
+        let bytes = (total * std::mem::size_of::<PairFactor>() + (n + 1) * 8) as u64;
+        if bytes > budget {
+            return None;
+        }
+        let mut start = Vec::with_capacity(n + 1);
+        start.push(0);
+        for c in &counts {
+            start.push(start.last().expect("pushed") + *c as u64);
+        }
+        let mut factor = vec![PairFactor::default(); total];
+        let ctx = SweepContext {
+            tree,
+            bins: &prepared.bins,
+            live: &prepared.live,
+            elem_area: &prepared.elem_area,
+            elem_normal: &prepared.elem_normal,
+            elem_center: &prepared.elem_center,
+            use_anti: prepared.use_anti,
+            two_sided: prepared.options.two_sided,
+        };
+        split_by_start(&mut factor, &start)
+            .into_par_iter()
+            .enumerate()
+            .for_each(|(e, out)| {
+                let mut k = 0;
+                ctx.for_each_pair(e, links, |_, _, f| {
+                    out[k] = f;
+                    k += 1;
+                });
+            });
+        Some(PairCache { start, factor })
+    }
+
+    /// Bytes held.
+    fn bytes(&self) -> u64 {
+        (self.start.len() * 8 + self.factor.len() * std::mem::size_of::<PairFactor>()) as u64
+    }
+}
+
+/// The antiradiance bins each element stores: those some link both writes into the element
+/// (light arriving at its front, or at either side when two-sided) and reads from it (a cluster
+/// link sent by one of its ancestors, or an exact coupling it sends). Every other bin of the
+/// element stays 0 or is never read, so it is not stored. Element `e`'s stored bins, in
+/// increasing order, are slots `start[e] .. start[e + 1]` of the antiradiance array.
+#[derive(Clone, Debug, Default)]
+struct LiveBins {
+    /// 64-bit words per element mask.
+    words: usize,
+    /// Per element, `words` words: bit b set when bin b is stored.
+    mask: Vec<u64>,
+    /// Per element, its first slot; `start[n]` is the slot count.
+    start: Vec<u32>,
+}
+
+impl LiveBins {
+    /// No bin stored for any of `n` elements (no antiradiance).
+    fn empty(n: usize, nb: usize) -> LiveBins {
+        let words = nb.div_ceil(64);
+        LiveBins {
+            words,
+            mask: vec![0; n * words],
+            start: vec![0; n + 1],
+        }
+    }
+
+    /// The bins each element of `prepared` (tree, links, element arrays set) must store.
+    fn build(prepared: &Prepared) -> LiveBins {
+        let (tree, links) = (&prepared.tree, &prepared.links);
+        let n = prepared.element_count();
+        let words = prepared.bins.len().div_ceil(64);
+        let two_sided = prepared.options.two_sided;
+        let set = |m: &mut [u64], bin: usize| m[bin >> 6] |= 1u64 << (bin & 63);
+
+        // Read: bins of the cluster links each node sends (inherited by its elements) and of the
+        // exact couplings each element sends that carry its antiradiance.
+        let mut node_sends = vec![0u64; tree.nodes.len() * words];
+        for l in &links.cluster {
+            let i = l.sender as usize;
+            set(&mut node_sends[i * words..(i + 1) * words], l.bin as usize);
+        }
+        let mut read = vec![0u64; n * words];
+        for e in 0..n {
+            for l in links.exact_start[e]..links.exact_start[e + 1] {
+                let s = links.exact_sender[l as usize] as usize;
+                let entries = &links.exact_entries[links.exact_entry_start[l as usize] as usize
+                    ..links.exact_entry_start[l as usize + 1] as usize];
+                for entry in entries {
+                    if entry.f_a != 0.0 || entry.o_a != 0.0 {
+                        set(&mut read[s * words..(s + 1) * words], entry.bin as usize);
+                    }
+                }
+            }
+        }
+        // Written, per element: its exact couplings' bins, and the bins of the cluster links
+        // into it and its ancestors where the light arrives at a side that creates antiradiance;
+        // then keep the read ones.
+        let mut mask = vec![0u64; n * words];
+        mask.par_chunks_mut(words)
+            .zip(read.par_chunks(words))
+            .enumerate()
+            .for_each(|(e, (m, r))| {
+                for l in links.exact_start[e]..links.exact_start[e + 1] {
+                    let entries = &links.exact_entries[links.exact_entry_start[l as usize] as usize
+                        ..links.exact_entry_start[l as usize + 1] as usize];
+                    for entry in entries {
+                        if entry.o_b != 0.0 || entry.o_a != 0.0 {
+                            set(m, entry.bin as usize);
+                        }
+                    }
+                }
+                let (n_e, x_e) = (prepared.elem_normal[e], prepared.elem_center[e]);
+                let mut reads = r.to_vec();
+                let mut node = tree.elements[e];
+                while node != NONE {
+                    let i = node as usize;
+                    for (k, word) in reads.iter_mut().enumerate() {
+                        *word |= node_sends[i * words + k];
+                    }
+                    let range =
+                        links.cluster_start[i] as usize..links.cluster_start[i + 1] as usize;
+                    for l in &links.cluster[range] {
+                        let origin =
+                            DVec3::new(l.origin[0] as f64, l.origin[1] as f64, l.origin[2] as f64);
+                        let v = x_e - origin;
+                        let d2 = v.length_squared();
+                        if d2 > 0.0 && (two_sided || -n_e.dot(v) > 0.0) {
+                            set(m, l.bin as usize);
+                        }
+                    }
+                    node = tree.nodes[i].parent;
+                }
+                for (word, r) in m.iter_mut().zip(&reads) {
+                    *word &= r;
+                }
+            });
+        let mut start = Vec::with_capacity(n + 1);
+        let mut total = 0u32;
+        start.push(0);
+        for m in mask.chunks(words.max(1)) {
+            total += m.iter().map(|w| w.count_ones()).sum::<u32>();
+            start.push(total);
+        }
+        start.truncate(n + 1);
+        LiveBins { words, mask, start }
+    }
+
+    /// Stored slots in all.
+    fn slots(&self) -> usize {
+        self.start.last().map_or(0, |&s| s as usize)
+    }
+
+    /// Bytes of the masks and offsets.
+    fn bytes(&self) -> u64 {
+        (self.mask.len() * 8 + self.start.len() * 4) as u64
+    }
+
+    /// The slot of element `e`'s bin `bin`, or `None` when it is not stored.
+    #[inline]
+    fn slot(&self, e: usize, bin: usize) -> Option<usize> {
+        let m = &self.mask[e * self.words..(e + 1) * self.words];
+        let (w, bit) = (bin >> 6, bin & 63);
+        if (m[w] >> bit) & 1 == 0 {
+            return None;
+        }
+        let below: u32 = m[..w].iter().map(|x| x.count_ones()).sum();
+        Some(self.start[e] as usize + (below + (m[w] & ((1u64 << bit) - 1)).count_ones()) as usize)
+    }
+
+    /// Element `e`'s stored bins, increasing (the order of its slots).
+    fn bins_of(&self, e: usize) -> impl Iterator<Item = usize> + '_ {
+        self.mask[e * self.words..(e + 1) * self.words]
+            .iter()
+            .enumerate()
+            .flat_map(|(k, &word)| {
+                let mut w = word;
+                std::iter::from_fn(move || {
+                    if w == 0 {
+                        return None;
+                    }
+                    let b = w.trailing_zeros() as usize;
+                    w &= w - 1;
+                    Some(k * 64 + b)
+                })
+            })
     }
 }
 
@@ -761,5 +1182,74 @@ impl FromF64 for f64 {
 impl FromF64 for f32 {
     fn from_f64(x: f64) -> Self {
         x as f32
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::build_patches;
+    use crate::scenes;
+
+    impl LiveBins {
+        /// Every bin of every element stored.
+        fn every(n: usize, nb: usize) -> LiveBins {
+            let words = nb.div_ceil(64);
+            let mut mask = vec![0u64; n * words];
+            for e in 0..n {
+                for bin in 0..nb {
+                    mask[e * words + (bin >> 6)] |= 1u64 << (bin & 63);
+                }
+            }
+            let start = (0..=n).map(|e| (e * nb) as u32).collect();
+            LiveBins { words, mask, start }
+        }
+    }
+
+    /// Storing only the live bins gives the result of storing every bin, for one- and two-sided
+    /// antiradiance and for a bin count above 64 (several mask words).
+    #[test]
+    fn live_bins_give_the_result_of_every_bin() {
+        let patches = build_patches(&scenes::cornell_box(), Some(150.0));
+        for (bins, two_sided) in [(8, false), (8, true), (9, false)] {
+            let options = SolverOptions {
+                bins,
+                two_sided,
+                max_iterations: 20,
+                ..SolverOptions::default()
+            };
+            let mut pruned = Prepared::new(&patches, &options, false);
+            let mut every = Prepared::new(&patches, &options, false);
+            every.live = LiveBins::every(every.element_count(), every.bins.len());
+            assert!(pruned.live.slots() < every.live.slots());
+            let (a, _) = pruned.solve(&patches, &Progress::hidden());
+            let (b, _) = every.solve(&patches, &Progress::hidden());
+            assert_eq!(a.stats.iterations, b.stats.iterations);
+            for (x, y) in a.patch_radiance.iter().zip(&b.patch_radiance) {
+                for c in 0..3 {
+                    assert!(
+                        (x[c] - y[c]).abs() <= 1e-9 * y[c].abs().max(1e-6),
+                        "bins {bins} two-sided {two_sided}: {x:?} vs {y:?}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn live_bin_slots_follow_the_mask() {
+        let mut live = LiveBins::empty(2, 130);
+        for (e, bin) in [(0, 3), (0, 64), (0, 129), (1, 0), (1, 70)] {
+            live.mask[e * live.words + (bin >> 6)] |= 1u64 << (bin & 63);
+        }
+        live.start = vec![0, 3, 5];
+        assert_eq!(live.bins_of(0).collect::<Vec<_>>(), vec![3, 64, 129]);
+        assert_eq!(live.bins_of(1).collect::<Vec<_>>(), vec![0, 70]);
+        assert_eq!(live.slot(0, 3), Some(0));
+        assert_eq!(live.slot(0, 64), Some(1));
+        assert_eq!(live.slot(0, 129), Some(2));
+        assert_eq!(live.slot(0, 4), None);
+        assert_eq!(live.slot(1, 70), Some(4));
+        assert_eq!(live.slots(), 5);
     }
 }

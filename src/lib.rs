@@ -19,6 +19,7 @@ pub mod hierarchy;
 pub mod links;
 pub mod memory;
 pub mod mesh;
+pub mod model;
 pub mod output;
 pub mod progress;
 pub mod raytrace;

@@ -30,6 +30,12 @@ pub struct SolveStats {
     /// Times the hierarchical solver jumped over the geometric tail of its sweeps (see
     /// [`crate::solve::Convergence::extrapolation_factor`]).
     pub extrapolations: usize,
+    /// What the hierarchical solver modelled (channels, antiradiance, stored bins) and what that
+    /// saved; `None` for the dense solver and the path tracer.
+    pub model: Option<crate::model::ModelStats>,
+    /// Seconds per stage of the hierarchical solver (tree, links, model, iterate); `None` for
+    /// the dense solver and the path tracer.
+    pub stage_seconds: Option<crate::hierarchical::HierarchyTimings>,
 }
 
 /// A solved scene.

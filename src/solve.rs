@@ -38,6 +38,12 @@ pub struct SolverOptions {
     /// Exact direct light: the first bounce from the emitters with shadow rays, antiradiance for
     /// the indirect bounces only (see [`crate::direct`]). Default false.
     pub direct_light: bool,
+    /// Memory the hierarchical solver may spend caching the geometric factor of every (receiving
+    /// element, cluster link) pair, MB. The cache makes each sweep a stream of multiply-adds
+    /// (about 3x faster sweeps, which is what relighting needs); a scene whose pairs do not fit
+    /// computes them on the fly every sweep instead, with the same result. 8 bytes per pair;
+    /// 0 disables it. 1024 by default.
+    pub pair_cache_mb: usize,
 }
 
 impl Default for SolverOptions {
@@ -60,6 +66,7 @@ impl SolverOptions {
             epsilon: 1.0,
             split_depth: 4,
             direct_light: false,
+            pair_cache_mb: 1024,
         }
     }
 

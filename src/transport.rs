@@ -347,26 +347,34 @@ pub fn couple(
 
 /// Applies one coupling to a receiver's accumulators: adds `f_b B_s - f_a A_s[bin]` to the
 /// irradiance sum `h` and `o_b B_s - o_a A_s[bin]` to the receiver's antiradiance bin, reading the
-/// sender's radiance `b_s` and antiradiance bins `anti_s` (ignored when `use_anti` is false).
+/// sender's radiance `b_s` and its antiradiance in a bin through `anti_s` (not called when
+/// `use_anti` is false). `C` is the number of colour channels (3, or 1 for grey scenes).
 /// Returns the coupling's share of the receiver's form-factor row sum. Shared by the dense and
 /// hierarchical solvers, so their element-to-element transport is the same code.
-pub fn gather_entries(
+///
+/// # Panics
+/// When an entry's bin is out of range of `a_acc`.
+pub fn gather_entries<const C: usize>(
     entries: &[Entry],
-    b_s: [f64; 3],
-    anti_s: &[[f32; 3]],
+    b_s: [f64; C],
+    anti_s: impl Fn(usize) -> [f64; C],
     use_anti: bool,
     two_sided: bool,
-    h: &mut [f64; 3],
-    a_acc: &mut [[f64; 3]],
+    h: &mut [f64; C],
+    a_acc: &mut [[f64; C]],
 ) -> f64 {
     let mut row = 0.0;
     for e in entries {
         row += if two_sided { e.f_a } else { e.f_a + e.f_b } as f64;
-        let a_s = anti_s[e.bin as usize];
-        for c in 0..3 {
-            let a = if use_anti { a_s[c] as f64 } else { 0.0 };
-            h[c] += e.f_b as f64 * b_s[c] - e.f_a as f64 * a;
-            a_acc[e.bin as usize][c] += e.o_b as f64 * b_s[c] - e.o_a as f64 * a;
+        let bin = e.bin as usize;
+        let a_s = if use_anti && (e.f_a != 0.0 || e.o_a != 0.0) {
+            anti_s(bin)
+        } else {
+            [0.0; C]
+        };
+        for c in 0..C {
+            h[c] += e.f_b as f64 * b_s[c] - e.f_a as f64 * a_s[c];
+            a_acc[bin][c] += e.o_b as f64 * b_s[c] - e.o_a as f64 * a_s[c];
         }
     }
     row

@@ -1,0 +1,123 @@
+//! What a scene requires the solver to model (issue 4): the hierarchical solver pays only for
+//! what a scene needs.
+//!
+//! - **Channels**: a grey scene (every albedo and every source radiance has equal R, G and B)
+//!   is solved in one channel and expanded to RGB at the end; others in three.
+//! - **Antiradiance**: a convex enclosure (every element lies on or in front of every other
+//!   element's plane) has no occlusion at all, so antiradiance would carry nothing: it is solved
+//!   as plain radiosity, with no antiradiance bins stored.
+//! - **Bins**: an element stores only the antiradiance bins some link both writes into it and
+//!   reads from it (see `LiveBins` in [`crate::hierarchical`]); with one-sided surfaces that is
+//!   at most the back hemisphere, and only the directions that lead to a receiver.
+//!
+//! What was decided is reported per solve in [`ModelStats`] (the JSON report's `stats.model`).
+
+use glam::DVec3;
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::hierarchy::ClusterTree;
+
+/// What the hierarchical solver modelled for one solve, and what it saved.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct ModelStats {
+    /// Colour channels solved: 1 for a grey scene, 3 otherwise.
+    pub channels: usize,
+    /// True when antiradiance was propagated (false for a convex enclosure, or when switched off).
+    pub antiradiance: bool,
+    /// True when the scene is a convex enclosure: all elements see each other unoccluded.
+    pub convex_enclosure: bool,
+    /// Antiradiance values stored per sweep state: (element, bin) slots that some link both
+    /// writes and reads.
+    pub anti_bins_stored: u64,
+    /// Slots a solver storing every bin of every element would hold (elements x bins).
+    pub anti_bins_full: u64,
+    /// Bytes of per-sweep state (two copies of radiance and antiradiance) saved against three
+    /// channels and every bin.
+    pub bytes_saved: u64,
+}
+
+/// Tolerance of the convexity test, unit frame (scene diameter 1): a vertex this far behind a
+/// plane still counts as on it.
+pub const CONVEX_TOLERANCE: f64 = 1e-7;
+
+/// True when `rgb` is grey: its three channels equal up to a relative 1e-12.
+pub fn is_grey(rgb: [f64; 3]) -> bool {
+    let scale = rgb[0].abs().max(rgb[1].abs()).max(rgb[2].abs());
+    (rgb[0] - rgb[1]).abs() <= 1e-12 * scale && (rgb[0] - rgb[2]).abs() <= 1e-12 * scale
+}
+
+/// True when every element of a finalized tree lies on or in front of the plane of every other
+/// element (within [`CONVEX_TOLERANCE`]): the elements bound a convex region from inside (or
+/// part of its boundary), so no element can block the light between two others.
+///
+/// Each distinct plane is tested against the tree: a node whose bounding box lies wholly in front
+/// of the plane is accepted without visiting its elements, so a convex scene costs about
+/// (distinct planes) x (nodes near each plane), and a non-convex one usually stops at its first
+/// plane. Elements without a plane (degenerate) make the scene non-convex.
+pub fn is_convex_enclosure(tree: &ClusterTree) -> bool {
+    if tree.elements.is_empty() {
+        return false;
+    }
+    // Distinct planes (normal, offset), deduplicated on a fine grid.
+    let mut planes: Vec<(DVec3, f64)> = Vec::new();
+    let mut seen = std::collections::HashSet::new();
+    for &node in &tree.elements {
+        let Some((n, d)) = tree.nodes[node as usize].plane else {
+            return false;
+        };
+        let key = (
+            (n.x * 1e9).round() as i64,
+            (n.y * 1e9).round() as i64,
+            (n.z * 1e9).round() as i64,
+            (d * 1e9).round() as i64,
+        );
+        if seen.insert(key) {
+            planes.push((n, d));
+        }
+    }
+    planes.par_iter().all(|&(n, d)| all_in_front(tree, n, d))
+}
+
+/// True when every element corner below the root lies at signed distance >= -tolerance from the
+/// plane `n . x = d`.
+fn all_in_front(tree: &ClusterTree, n: DVec3, d: f64) -> bool {
+    let mut stack = vec![0u32];
+    while let Some(i) = stack.pop() {
+        let node = &tree.nodes[i as usize];
+        // Lowest signed distance over the node's bounding box.
+        let (lo, hi) = node.bounds;
+        let center = 0.5 * (lo + hi);
+        let half = 0.5 * (hi - lo);
+        let lowest = n.dot(center) - d - n.abs().dot(half);
+        if lowest >= -CONVEX_TOLERANCE {
+            continue;
+        }
+        if node.is_leaf() {
+            if node
+                .corners
+                .iter()
+                .any(|c| n.dot(*c) - d < -CONVEX_TOLERANCE)
+            {
+                return false;
+            }
+        } else {
+            stack.extend(node.first_child..node.first_child + node.child_count as u32);
+        }
+    }
+    true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn grey_is_exact_up_to_rounding() {
+        assert!(is_grey([0.5, 0.5, 0.5]));
+        assert!(is_grey([0.0, 0.0, 0.0]));
+        assert!(is_grey([1e30, 1e30, 1e30]));
+        assert!(!is_grey([0.5, 0.5, 0.51]));
+        assert!(!is_grey([0.0, 0.0, 1e-30]));
+    }
+}
