@@ -12,7 +12,7 @@
 use std::path::Path;
 use std::time::Duration;
 
-use antiradiance::relight::{sweep_weights, Relighter};
+use antiradiance::relight::{emitter_bands, sweep_weights, Relighter};
 use antiradiance::scene::{load_obj, Scene, SceneOptions};
 use antiradiance::scenes;
 use antiradiance::solve::SolverOptions;
@@ -21,6 +21,8 @@ use glam::DVec3;
 
 /// Frames of the sweep one relight steps through.
 const SWEEP_FRAMES: usize = 30;
+/// Bands of emitters precomputed as lights for the mixing benchmark.
+const BANDS: usize = 8;
 /// Emission kept by emitters far from the spot.
 const DIM: f64 = 0.1;
 
@@ -102,6 +104,48 @@ fn relight(c: &mut Criterion) {
                 relit.solution.stats.iterations
             })
         });
+        // Relighting by precomputed lights: the emitters cut into BANDS bands, each solved once,
+        // then every relight is a linear combination (no sweep).
+        let emitters: Vec<usize> = (0..scene.len()).filter(|&t| scene.is_emitter(t)).collect();
+        let centroids: Vec<DVec3> = emitters
+            .iter()
+            .map(|&t| {
+                let [a, b, c] = scene.corners(t);
+                (a + b + c) / 3.0
+            })
+            .collect();
+        let (band, centres) = emitter_bands(&centroids, BANDS);
+        for k in 0..centres.len() {
+            let mut emission = vec![[0.0; 3]; scene.len()];
+            for (&t, &b) in emitters.iter().zip(&band) {
+                if b == k {
+                    emission[t] = scene.emission[t];
+                }
+            }
+            relighter
+                .add_light(&format!("band {k}"), &emission)
+                .expect("valid emission");
+        }
+        let mixes: Vec<Vec<[f64; 3]>> = [SWEEP_FRAMES / 2, SWEEP_FRAMES / 2 + 1]
+            .iter()
+            .map(|&frame| {
+                sweep_weights(&centres, frame, SWEEP_FRAMES, DIM)
+                    .iter()
+                    .map(|&w| [w; 3])
+                    .collect()
+            })
+            .collect();
+        let mut next = 0;
+        group.bench_function(
+            format!("{preset}_preset_mix_{}_lights", centres.len()),
+            |b| {
+                b.iter(|| {
+                    let relit = relighter.mix(&mixes[next]).expect("valid intensities");
+                    next = 1 - next;
+                    relit.solution.triangle_radiance.len()
+                })
+            },
+        );
     }
     group.finish();
 }

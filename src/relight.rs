@@ -108,6 +108,19 @@ pub struct Relighter {
     warm: Option<ElementState>,
     /// Seconds spent building patches, tree and links.
     build_seconds: f64,
+    /// Precomputed lights ([`Relighter::add_light`]).
+    lights: Vec<Light>,
+}
+
+/// A light of a [`Relighter`]: an emission pattern and the scene's response to it.
+#[derive(Clone, Debug)]
+struct Light {
+    /// Its name, as given.
+    name: String,
+    /// Emission per input triangle at unit intensity, scene units.
+    emission: Vec<[f64; 3]>,
+    /// Outgoing radiance per patch it causes, scene units, negative values kept.
+    response: Vec<[f64; 3]>,
 }
 
 impl Relighter {
@@ -182,6 +195,7 @@ impl Relighter {
             material_names: scene.material_names.clone(),
             warm: None,
             build_seconds: start.elapsed().as_secs_f64(),
+            lights: Vec::new(),
         })
     }
 
@@ -330,6 +344,127 @@ impl Relighter {
             warm_started,
             seconds: start.elapsed().as_secs_f64(),
         }
+    }
+
+    /// Precomputes the scene's response to an emission pattern (scene units per input
+    /// triangle, at unit intensity) as a light that [`Relighter::mix`] can then scale and
+    /// combine with the others in time linear in the patch count, with no sweep: radiance is
+    /// linear in emission, so a mix is exactly the solve of the mixed emission (up to the
+    /// tolerance each light was solved to). One from-scratch solve per light; returns the
+    /// light's index. The relighter's current emission and warm state are left unchanged.
+    ///
+    /// Errors: as [`Relighter::set_emission`] (nothing is added).
+    pub fn add_light(&mut self, name: &str, per_triangle: &[[f64; 3]]) -> Result<usize> {
+        let current = self.emission.clone();
+        let warm = self.warm.take();
+        let scale = self.patches.emission_scale;
+        self.set_emission(per_triangle)?;
+        // Keep negative radiance: the sum of clamped responses would not be the clamped sum.
+        let clamp = std::mem::replace(&mut self.prepared.options.clamp_negative, false);
+        let relit = self.solve(&Progress::hidden());
+        self.prepared.options.clamp_negative = clamp;
+        self.emission = current;
+        self.warm = warm;
+        self.patches.emission_scale = scale;
+        self.lights.push(Light {
+            name: name.to_string(),
+            emission: per_triangle.to_vec(),
+            response: relit.solution.patch_radiance,
+        });
+        Ok(self.lights.len() - 1)
+    }
+
+    /// Adds one light ([`Relighter::add_light`]) per material that emits in the current
+    /// emission, named after the material, with that material's triangles at their current
+    /// emission; returns their indices.
+    pub fn add_material_lights(&mut self) -> Vec<usize> {
+        let mut added = Vec::new();
+        for m in 0..self.material_names.len() as u32 {
+            let emission: Vec<[f64; 3]> = (0..self.emission.len())
+                .map(|t| {
+                    if self.material[t] == Some(m) {
+                        self.emission[t]
+                    } else {
+                        [0.0; 3]
+                    }
+                })
+                .collect();
+            if emission.iter().any(|e| e.iter().any(|&x| x > 0.0)) {
+                let name = self.material_names[m as usize].clone();
+                added.push(self.add_light(&name, &emission).expect("checked emission"));
+            }
+        }
+        added
+    }
+
+    /// Names of the precomputed lights, in index order.
+    pub fn light_names(&self) -> Vec<&str> {
+        self.lights.iter().map(|l| l.name.as_str()).collect()
+    }
+
+    /// The solution for the precomputed lights at the given RGB intensities (one per light,
+    /// index order; 1 = as added), by linear combination: no sweep, time linear in the patch
+    /// count. The emission becomes the mix's, and the next [`Relighter::solve`] starts cold.
+    ///
+    /// Errors: [`Error::Parameter`] when the count is not the number of lights or an
+    /// intensity is negative, NaN or infinite (nothing changes).
+    pub fn mix(&mut self, intensities: &[[f64; 3]]) -> Result<Relit> {
+        let start = Instant::now();
+        if intensities.len() != self.lights.len() {
+            return Err(Error::Parameter(format!(
+                "{} intensities for {} lights",
+                intensities.len(),
+                self.lights.len()
+            )));
+        }
+        for (k, &w) in intensities.iter().enumerate() {
+            check_radiance(w, || format!("intensity of light {k}"))?;
+        }
+        let mut emission = vec![[0.0f64; 3]; self.emission.len()];
+        let mut radiance = vec![[0.0f64; 3]; self.patches.len()];
+        for (light, w) in self.lights.iter().zip(intensities) {
+            for (dst, src) in emission.iter_mut().zip(&light.emission) {
+                for c in 0..3 {
+                    dst[c] += w[c] * src[c];
+                }
+            }
+            for (dst, src) in radiance.iter_mut().zip(&light.response) {
+                for c in 0..3 {
+                    dst[c] += w[c] * src[c];
+                }
+            }
+        }
+        self.emission = emission;
+        self.warm = None;
+        let brightest = self
+            .emission
+            .iter()
+            .flat_map(|e| e.iter().copied())
+            .fold(0.0f64, f64::max);
+        if brightest > 0.0 {
+            self.patches.emission_scale = brightest;
+        }
+        let scale = self.patches.emission_scale;
+        for (p, &t) in self.patches.parent.iter().enumerate() {
+            self.patches.emission[p] = self.emission[t as usize].map(|x| x / scale);
+        }
+        let normalized: Vec<[f64; 3]> = radiance.iter().map(|b| b.map(|x| x / scale)).collect();
+        let stats = crate::solution::SolveStats {
+            converged: true,
+            links: self.prepared.links.len() as u64,
+            ..Default::default()
+        };
+        let solution = crate::solve::finish(
+            &self.patches,
+            normalized,
+            stats,
+            self.prepared.options.clamp_negative,
+        );
+        Ok(Relit {
+            solution,
+            warm_started: false,
+            seconds: start.elapsed().as_secs_f64(),
+        })
     }
 
     /// Sets the emission of every input triangle ([`Relighter::set_emission`]) and solves
@@ -502,6 +637,16 @@ pub struct RelightArgs {
         help_heading = "Animation options"
     )]
     pub dim: f64,
+    /// Precompute K lights, the emitters cut into K bands across the sweep, and mix them per
+    /// frame (no sweep per frame: the spot then moves band by band, each band at the spot
+    /// brightness of its centre). 0 (the default) re-solves every frame, warm-started.
+    #[arg(
+        long,
+        value_name = "K",
+        default_value_t = 0,
+        help_heading = "Animation options"
+    )]
+    pub bands: usize,
     /// Directory for the frames `frame_0000.png`, `frame_0001.png`, ... (created when missing;
     /// its parent must exist; existing frames of the same names are replaced).
     #[arg(long, value_name = "DIR", help_heading = "Output options")]
@@ -514,6 +659,53 @@ pub struct RelightArgs {
     /// No progress bar (the summary line on stdout is still printed).
     #[arg(long, short)]
     pub quiet: bool,
+}
+
+/// Largest `--bands`.
+pub const MAX_BANDS: usize = 256;
+
+/// Cuts emitters into `bands` bands of equal width along the axis their `centroids` spread most;
+/// returns each emitter's band and each band's centroid (mean of its emitters; bands without
+/// emitters are dropped, so there may be fewer than asked). Precondition: `bands >= 1`.
+pub fn emitter_bands(centroids: &[DVec3], bands: usize) -> (Vec<usize>, Vec<DVec3>) {
+    let (lo, hi) = centroids.iter().fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(lo, hi), &c| (lo.min(c), hi.max(c)),
+    );
+    let extent = hi - lo;
+    let axis = if extent.x >= extent.y && extent.x >= extent.z {
+        0
+    } else if extent.y >= extent.z {
+        1
+    } else {
+        2
+    };
+    let span = extent[axis];
+    let raw: Vec<usize> = centroids
+        .iter()
+        .map(|c| {
+            if span > 0.0 && span.is_finite() {
+                (((c[axis] - lo[axis]) / span * bands as f64) as usize).min(bands - 1)
+            } else {
+                0
+            }
+        })
+        .collect();
+    // Renumber the non-empty bands in order.
+    let mut used: Vec<usize> = raw.clone();
+    used.sort_unstable();
+    used.dedup();
+    let band: Vec<usize> = raw
+        .iter()
+        .map(|b| used.binary_search(b).expect("present"))
+        .collect();
+    let mut sum = vec![(DVec3::ZERO, 0usize); used.len()];
+    for (&b, &c) in band.iter().zip(centroids) {
+        sum[b].0 += c;
+        sum[b].1 += 1;
+    }
+    let centres = sum.iter().map(|(s, n)| *s / *n as f64).collect();
+    (band, centres)
 }
 
 /// Largest `--frames` (frame names have four digits).
@@ -631,6 +823,12 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
             args.frames
         )));
     }
+    if args.bands > MAX_BANDS {
+        return Err(Error::Parameter(format!(
+            "--bands {} outside 0..={MAX_BANDS}",
+            args.bands
+        )));
+    }
     if !(0.0..=1.0).contains(&args.dim) {
         return Err(Error::Parameter(format!(
             "--dim {} outside [0, 1]",
@@ -694,15 +892,45 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
             .sum()
     };
     let base_power = power(&base);
+    // With --bands: one precomputed light per band of emitters, mixed per frame.
+    let lights_start = Instant::now();
+    let bands = (args.bands > 0).then(|| emitter_bands(&centroids, args.bands));
+    if let Some((band, centres)) = &bands {
+        for k in 0..centres.len() {
+            let mut emission = vec![[0.0; 3]; base.len()];
+            for (&t, &b) in emitters.iter().zip(band) {
+                if b == k {
+                    emission[t] = base[t];
+                }
+            }
+            relighter.add_light(&format!("band {k}"), &emission)?;
+        }
+    }
+    let lights_seconds = lights_start.elapsed().as_secs_f64();
     let progress = Progress::new("relight", args.frames as u64, !args.quiet);
     let mut records = Vec::with_capacity(args.frames);
     for frame in 0..args.frames {
-        let weights = sweep_weights(&centroids, frame, args.frames, args.dim);
-        let mut emission = base.clone();
-        for (&t, w) in emitters.iter().zip(&weights) {
-            emission[t] = base[t].map(|x| x * w);
-        }
-        let relit = relighter.relight(&emission)?;
+        let (relit, emission) = match &bands {
+            None => {
+                let weights = sweep_weights(&centroids, frame, args.frames, args.dim);
+                let mut emission = base.clone();
+                for (&t, w) in emitters.iter().zip(&weights) {
+                    emission[t] = base[t].map(|x| x * w);
+                }
+                (relighter.relight(&emission)?, emission)
+            }
+            Some((_, centres)) => {
+                // The spot's brightness at each band's centre, over the same span as the
+                // emitters (the centres are inside it).
+                let mut points = centres.clone();
+                points.extend(&centroids);
+                let weights = sweep_weights(&points, frame, args.frames, args.dim);
+                let intensities: Vec<[f64; 3]> =
+                    weights[..centres.len()].iter().map(|&w| [w; 3]).collect();
+                let relit = relighter.mix(&intensities)?;
+                (relit, relighter.emission().to_vec())
+            }
+        };
         timings.solve += relit.seconds;
         if camera.exposure.is_none() {
             camera.exposure = Some(render::auto_exposure(relighter.patches(), &relit.solution));
@@ -761,6 +989,8 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
                 }),
             )
             .insert("build_seconds", build_seconds)
+            .insert("bands", bands.as_ref().map_or(0, |(_, c)| c.len()))
+            .insert("lights_seconds", lights_seconds)
             .insert(
                 "hierarchy",
                 json!({
@@ -776,7 +1006,13 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
     }
     println!(
         "{}",
-        relight_summary(&loaded, args, build_seconds, &summary)
+        relight_summary(
+            &loaded,
+            args,
+            build_seconds,
+            bands.as_ref().map(|(_, c)| (c.len(), lights_seconds)),
+            &summary
+        )
     );
     Ok(())
 }
@@ -786,19 +1022,25 @@ fn relight_summary(
     loaded: &driver::Loaded,
     args: &RelightArgs,
     build_seconds: f64,
+    lights: Option<(usize, f64)>,
     summary: &FrameSummary,
 ) -> String {
+    let build = match lights {
+        Some((k, s)) => {
+            format!("build {build_seconds:.2} s and {k} band lights in {s:.2} s once, then mixed")
+        }
+        None => format!("build {build_seconds:.2} s once, then"),
+    };
     let warm = match summary.mean_warm_seconds {
         Some(s) => format!(", {:.1} ms per warm-started relight", 1e3 * s),
         None => String::new(),
     };
     format!(
-        "Relit {} ({} triangles, {} patches) over {} frames: build {:.2} s once, then {:.1} ms per relight on average{warm} (min {:.1} ms, max {:.1} ms, {:.1} iterations); frames in {}.",
+        "Relit {} ({} triangles, {} patches) over {} frames: {build} {:.1} ms per relight on average{warm} (min {:.1} ms, max {:.1} ms, {:.1} iterations); frames in {}.",
         args.scene.scene.display(),
         loaded.scene.len(),
         loaded.patches.len(),
         args.frames,
-        build_seconds,
         1e3 * summary.mean_seconds,
         1e3 * summary.min_seconds,
         1e3 * summary.max_seconds,

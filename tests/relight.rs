@@ -123,6 +123,68 @@ fn relit_frames_match_from_scratch_solves_within_one_percent() {
 }
 
 #[test]
+fn mixed_lights_match_from_scratch_solves_within_one_percent() {
+    let scene = scenes::cornell_box();
+    let options = SolverOptions::default();
+    let mut relighter = Relighter::new(&scene, None, &options).unwrap();
+    let light = cornell_part("light");
+    let ceiling = cornell_part("ceiling");
+    // Two lights: the first light triangle, and two ceiling triangles (not emitters in the scene).
+    let mut first = vec![[0.0; 3]; scene.len()];
+    first[light.start] = scene.emission[light.start];
+    let mut glow = vec![[0.0; 3]; scene.len()];
+    glow[ceiling.start] = [0.5, 1.0, 4.0];
+    glow[ceiling.start + 1] = [0.5, 1.0, 4.0];
+    assert_eq!(relighter.add_light("first", &first).unwrap(), 0);
+    assert_eq!(relighter.add_light("glow", &glow).unwrap(), 1);
+    assert_eq!(relighter.light_names(), vec!["first", "glow"]);
+    assert!(relighter.add_light("bad", &glow[..3]).is_err());
+
+    for intensities in [
+        [[1.0; 3], [0.0; 3]],
+        [[0.0; 3], [1.0; 3]],
+        [[2.0, 0.5, 1.0], [0.3, 0.3, 3.0]],
+        [[0.0; 3], [0.0; 3]],
+    ] {
+        let mixed = relighter.mix(&intensities).unwrap();
+        assert_finite(&mixed.solution);
+        // The relighter's emission is the mix's.
+        let emission: Vec<[f64; 3]> = (0..scene.len())
+            .map(|t| {
+                std::array::from_fn(|c| {
+                    intensities[0][c] * first[t][c] + intensities[1][c] * glow[t][c]
+                })
+            })
+            .collect();
+        assert_eq!(relighter.emission(), &emission[..]);
+        let truth_scene = with_emission(&scene, &emission);
+        let truth = from_scratch(&truth_scene, &options);
+        if emission.iter().all(|e| e == &[0.0; 3]) {
+            assert!(mixed
+                .solution
+                .triangle_radiance
+                .iter()
+                .all(|b| b == &[0.0; 3]));
+            continue;
+        }
+        let err = error_against(&truth_scene, &mixed.solution, &truth);
+        assert!(
+            err < 0.01,
+            "{intensities:?}: {:.3}% from scratch",
+            100.0 * err
+        );
+    }
+    assert!(
+        relighter.mix(&[[1.0; 3]]).is_err(),
+        "one intensity per light"
+    );
+    assert!(relighter.mix(&[[1.0; 3], [f64::NAN, 0.0, 0.0]]).is_err());
+    // A solve after a mix is a cold solve of the mixed emission.
+    let relit = relighter.solve(&Progress::hidden());
+    assert!(!relit.warm_started);
+}
+
+#[test]
 fn scene_without_emitters_at_build_time_relights_in_scene_units() {
     let lit = scenes::cornell_box();
     let dark = with_emission(&lit, &vec![[0.0; 3]; lit.len()]);
@@ -533,6 +595,62 @@ fn cli_writes_one_frame_per_relight_and_a_report() {
     assert!(mean > 0.0);
     assert!(json["summary"]["mean_warm_seconds"].as_f64().unwrap() > 0.0);
     assert!(json["time_seconds"]["total"].as_f64().unwrap() > 0.0);
+}
+
+#[test]
+fn cli_mixes_precomputed_band_lights() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = lamps_scene(dir.path());
+    let out = dir.path().join("frames");
+    let report = dir.path().join("relight.json");
+    let o = run(&[
+        "relight",
+        s(&scene),
+        "--frames",
+        "3",
+        "--bands",
+        "2",
+        "--out",
+        s(&out),
+        "--report",
+        s(&report),
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--quiet",
+    ]);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{stdout} {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(stdout.contains("band lights"), "{stdout}");
+    for frame in 0..3 {
+        assert!(frame_path(&out, frame).exists(), "frame {frame}");
+    }
+    let json: Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let bands = json["bands"].as_u64().unwrap();
+    assert!((1..=2).contains(&bands), "{bands}");
+    assert!(json["lights_seconds"].as_f64().unwrap() > 0.0);
+    for frame in json["frames"].as_array().unwrap() {
+        // Mixing needs no sweep.
+        assert_eq!(frame["iterations"], 0);
+        assert_eq!(frame["warm_started"], false);
+    }
+    let o = run(&[
+        "relight",
+        s(&scene),
+        "--frames",
+        "2",
+        "--bands",
+        "100000",
+        "--out",
+        s(&out),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--bands"));
 }
 
 #[test]
