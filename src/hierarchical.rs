@@ -432,17 +432,26 @@ impl Prepared {
                         };
                         match pairs {
                             Some(cache) => {
+                                // A stream of multiply-adds: factors, intensities and bins
+                                // side by side (a factor of 0 adds nothing).
                                 let mut k = cache.start[e] as usize;
                                 let mut node = tree.elements[e];
                                 while node != NONE {
                                     let range = links.cluster_start[node as usize] as usize
                                         ..links.cluster_start[node as usize + 1] as usize;
-                                    for (l, i) in
-                                        links.cluster[range.clone()].iter().zip(&intensity[range])
+                                    let len = range.len();
+                                    for ((f, i), &bin) in cache.factor[k..k + len]
+                                        .iter()
+                                        .zip(&intensity[range.clone()])
+                                        .zip(&cache.link_bin[range])
                                     {
-                                        add(l, i, cache.factor[k]);
-                                        k += 1;
+                                        let bin = bin as usize;
+                                        for c in 0..C {
+                                            h[c] += f.irradiance as f64 * i[c];
+                                            a_acc[bin][c] += f.anti as f64 * i[c];
+                                        }
                                     }
+                                    k += len;
                                     node = tree.nodes[node as usize].parent;
                                 }
                             }
@@ -598,6 +607,8 @@ struct SenderGroups {
     elem_group: Vec<u32>,
     /// Large nodes, children before parents.
     order: Vec<u32>,
+    /// (group, its parent group) for every group with a parent, children before parents.
+    child_parent: Vec<(u32, u32)>,
 }
 
 /// What feeds a group: a child's group or an element of a small child.
@@ -727,6 +738,16 @@ impl SenderGroups {
                 }
             }
         }
+        for &i in &order {
+            let (g0, g1) = groups.range[i as usize];
+            for g in g0..g1 {
+                let p = groups.parent_group[g as usize];
+                if p != NONE {
+                    debug_assert!(p > g, "parents' groups follow their children's");
+                    groups.child_parent.push((g, p));
+                }
+            }
+        }
         groups.order = order;
         groups
     }
@@ -755,6 +776,10 @@ impl SenderGroups {
         group_b: &mut [[f64; C]],
         group_a: &mut [[f64; C]],
     ) {
+        // group_a is bin-major: bin b of group g at b * ng + g, so the groups of one node in
+        // one bin (what a link's pull reads) are side by side.
+        let ng = self.normal.len();
+        debug_assert_eq!(group_a.len(), ng * nb);
         group_b.fill([0.0; C]);
         group_a.fill([0.0; C]);
         for (e, &g) in self.elem_group.iter().enumerate() {
@@ -765,34 +790,27 @@ impl SenderGroups {
             for c in 0..C {
                 group_b[g][c] += a * radiance[e][c];
             }
-            let dst = &mut group_a[g * nb..(g + 1) * nb];
             let stored = &anti[live.start[e] as usize..live.start[e + 1] as usize];
             for (bin, s) in live.bins_of(e).zip(stored) {
+                let dst = &mut group_a[bin * ng + g];
                 for c in 0..C {
-                    dst[bin][c] += a * s[c] as f64;
+                    dst[c] += a * s[c] as f64;
                 }
             }
         }
-        for &i in &self.order {
-            let (g0, g1) = self.range[i as usize];
-            for g in g0 as usize..g1 as usize {
-                let p = self.parent_group[g];
-                if p == NONE {
-                    continue;
-                }
-                let p = p as usize;
-                let child = group_b[g];
-                for (d, s) in group_b[p].iter_mut().zip(child) {
+        // Children into parents; parents' groups come after their children's (post-order), so
+        // one pass in group order sums whole subtrees.
+        for &(g, p) in &self.child_parent {
+            let child = group_b[g as usize];
+            for (d, s) in group_b[p as usize].iter_mut().zip(child) {
+                *d += s;
+            }
+        }
+        for row in group_a.chunks_mut(ng.max(1)) {
+            for &(g, p) in &self.child_parent {
+                let child = row[g as usize];
+                for (d, s) in row[p as usize].iter_mut().zip(child) {
                     *d += s;
-                }
-                // Parents' groups are allocated after their children's (post-order).
-                debug_assert!(p > g);
-                let (lo, hi) = group_a.split_at_mut(p * nb);
-                let (src, dst) = (&lo[g * nb..(g + 1) * nb], &mut hi[..nb]);
-                for (d, s) in dst.iter_mut().zip(src) {
-                    for c in 0..C {
-                        d[c] += s[c];
-                    }
                 }
             }
         }
@@ -893,7 +911,6 @@ impl SweepContext<'_> {
         radiance: &[[f64; C]],
         anti: &[[f32; C]],
     ) -> [f64; C] {
-        let nb = self.bins.len();
         let w = DVec3::new(l.w[0] as f64, l.w[1] as f64, l.w[2] as f64);
         let bin = l.bin as usize;
         let mut acc = [0.0f64; C];
@@ -913,7 +930,11 @@ impl SweepContext<'_> {
         if groups.is_grouped(l.sender) {
             let (g0, g1) = groups.range[l.sender as usize];
             for g in g0 as usize..g1 as usize {
-                add(groups.normal[g].dot(w), group_b[g], group_a[g * nb + bin]);
+                add(
+                    groups.normal[g].dot(w),
+                    group_b[g],
+                    group_a[bin * groups.normal.len() + g],
+                );
             }
         } else {
             let (e0, e1) = self.tree.nodes[l.sender as usize].elements;
@@ -944,6 +965,8 @@ struct PairFactor {
 /// [`SweepContext::for_each_pair`]: element `e`'s pairs are `factor[start[e] .. start[e + 1]]`.
 #[derive(Clone, Debug, Default)]
 struct PairCache {
+    /// Bin of every cluster link (a compact copy of `ClusterLink::bin` for the stream).
+    link_bin: Vec<u16>,
     start: Vec<u64>,
     factor: Vec<PairFactor>,
 }
@@ -996,12 +1019,19 @@ impl PairCache {
                     k += 1;
                 });
             });
-        Some(PairCache { start, factor })
+        let link_bin = links.cluster.iter().map(|l| l.bin).collect();
+        Some(PairCache {
+            link_bin,
+            start,
+            factor,
+        })
     }
 
     /// Bytes held.
     fn bytes(&self) -> u64 {
-        (self.start.len() * 8 + self.factor.len() * std::mem::size_of::<PairFactor>()) as u64
+        (self.start.len() * 8
+            + self.link_bin.len() * 2
+            + self.factor.len() * std::mem::size_of::<PairFactor>()) as u64
     }
 }
 
