@@ -12,12 +12,11 @@
 use std::path::Path;
 use std::time::Duration;
 
-use antiradiance::relight::{emitter_bands, sweep_weights, Relighter};
+use antiradiance::relight::{emitter_centroids, sweep_weights, Relighter};
 use antiradiance::scene::{load_obj, Scene, SceneOptions};
 use antiradiance::scenes;
 use antiradiance::solve::SolverOptions;
 use criterion::{criterion_group, criterion_main, Criterion};
-use glam::DVec3;
 
 /// Frames of the sweep one relight steps through.
 const SWEEP_FRAMES: usize = 30;
@@ -51,14 +50,7 @@ fn bench_scene() -> (String, Scene) {
 
 /// The scene's emission in frame `frame` of the sweep.
 fn sweep_emission(scene: &Scene, frame: usize) -> Vec<[f64; 3]> {
-    let emitters: Vec<usize> = (0..scene.len()).filter(|&t| scene.is_emitter(t)).collect();
-    let centroids: Vec<DVec3> = emitters
-        .iter()
-        .map(|&t| {
-            let [a, b, c] = scene.corners(t);
-            (a + b + c) / 3.0
-        })
-        .collect();
+    let (emitters, centroids) = emitter_centroids(scene);
     let weights = sweep_weights(&centroids, frame, SWEEP_FRAMES, DIM);
     let mut emission = scene.emission.clone();
     for (&t, w) in emitters.iter().zip(weights) {
@@ -106,26 +98,14 @@ fn relight(c: &mut Criterion) {
         });
         // Relighting by precomputed lights: the emitters cut into BANDS bands, each solved once,
         // then every relight is a linear combination (no sweep).
-        let emitters: Vec<usize> = (0..scene.len()).filter(|&t| scene.is_emitter(t)).collect();
-        let centroids: Vec<DVec3> = emitters
-            .iter()
-            .map(|&t| {
-                let [a, b, c] = scene.corners(t);
-                (a + b + c) / 3.0
-            })
-            .collect();
-        let (band, centres) = emitter_bands(&centroids, BANDS);
-        for k in 0..centres.len() {
-            let mut emission = vec![[0.0; 3]; scene.len()];
-            for (&t, &b) in emitters.iter().zip(&band) {
-                if b == k {
-                    emission[t] = scene.emission[t];
-                }
-            }
-            relighter
-                .add_light(&format!("band {k}"), &emission)
-                .expect("valid emission");
-        }
+        // The relighter's emission is the last frame's: restore the scene's own first.
+        relighter
+            .set_emission(&scene.emission)
+            .expect("valid emission");
+        let (emitters, centroids) = emitter_centroids(&scene);
+        let centres = relighter
+            .add_band_lights(&emitters, &centroids, BANDS)
+            .expect("valid bands");
         let mixes: Vec<Vec<[f64; 3]>> = [SWEEP_FRAMES / 2, SWEEP_FRAMES / 2 + 1]
             .iter()
             .map(|&frame| {

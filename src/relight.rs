@@ -397,6 +397,45 @@ impl Relighter {
         added
     }
 
+    /// Adds one light ([`Relighter::add_light`]) per band of `emitters` (input triangles, with
+    /// their `centroids`) cut by [`emitter_bands`] into at most `bands` bands, each band's
+    /// triangles at their current emission; returns the centres of the bands added, in light
+    /// order (after any lights added before).
+    ///
+    /// Errors: [`Error::Parameter`] when `bands` is 0, the two slices differ in length or an
+    /// emitter index is out of range (nothing is added).
+    pub fn add_band_lights(
+        &mut self,
+        emitters: &[usize],
+        centroids: &[DVec3],
+        bands: usize,
+    ) -> Result<Vec<DVec3>> {
+        if bands == 0 || emitters.len() != centroids.len() {
+            return Err(Error::Parameter(format!(
+                "{bands} bands of {} emitters with {} centroids",
+                emitters.len(),
+                centroids.len()
+            )));
+        }
+        if let Some(&t) = emitters.iter().find(|&&t| t >= self.emission.len()) {
+            return Err(Error::Parameter(format!(
+                "emitter {t} out of range (the scene has {} triangles)",
+                self.emission.len()
+            )));
+        }
+        let (band, centres) = emitter_bands(centroids, bands);
+        for k in 0..centres.len() {
+            let mut emission = vec![[0.0; 3]; self.emission.len()];
+            for (&t, &b) in emitters.iter().zip(&band) {
+                if b == k {
+                    emission[t] = self.emission[t];
+                }
+            }
+            self.add_light(&format!("band {k}"), &emission)?;
+        }
+        Ok(centres)
+    }
+
     /// Names of the precomputed lights, in index order.
     pub fn light_names(&self) -> Vec<&str> {
         self.lights.iter().map(|l| l.name.as_str()).collect()
@@ -530,6 +569,37 @@ fn check_scene(scene: &Scene) -> Result<()> {
 /// along the sweep axis.
 pub const SPOT_WIDTH: f64 = 0.15;
 
+/// The axis (0, 1, 2) along which `centroids` spread most, with the lowest corner of their
+/// bounds and their extent along it (0 or NaN when they do not spread).
+fn sweep_axis(centroids: &[DVec3]) -> (DVec3, usize, f64) {
+    let (lo, hi) = centroids.iter().fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(lo, hi), &c| (lo.min(c), hi.max(c)),
+    );
+    let extent = hi - lo;
+    let axis = if extent.x >= extent.y && extent.x >= extent.z {
+        0
+    } else if extent.y >= extent.z {
+        1
+    } else {
+        2
+    };
+    (lo, axis, extent[axis])
+}
+
+/// The emitting triangles of `scene` (input order) and their centroids (scene units).
+pub fn emitter_centroids(scene: &Scene) -> (Vec<usize>, Vec<DVec3>) {
+    let emitters: Vec<usize> = (0..scene.len()).filter(|&t| scene.is_emitter(t)).collect();
+    let centroids = emitters
+        .iter()
+        .map(|&t| {
+            let [a, b, c] = scene.corners(t);
+            (a + b + c) / 3.0
+        })
+        .collect();
+    (emitters, centroids)
+}
+
 /// Brightness factor (in `[dim, 1]`) of each emitter in frame `frame` of `frames` of a sweep.
 ///
 /// A bright spot moves along the axis in which the emitters' `centroids` (world units) spread
@@ -544,19 +614,7 @@ pub fn sweep_weights(centroids: &[DVec3], frame: usize, frames: usize, dim: f64)
     } else {
         0.5
     };
-    let (lo, hi) = centroids.iter().fold(
-        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
-        |(lo, hi), &c| (lo.min(c), hi.max(c)),
-    );
-    let extent = hi - lo;
-    let axis = if extent.x >= extent.y && extent.x >= extent.z {
-        0
-    } else if extent.y >= extent.z {
-        1
-    } else {
-        2
-    };
-    let span = extent[axis];
+    let (lo, axis, span) = sweep_axis(centroids);
     if !(span > 0.0 && span.is_finite()) {
         let pulse = dim + (1.0 - dim) * (std::f64::consts::PI * phase).sin();
         return vec![pulse.clamp(dim, 1.0); centroids.len()];
@@ -668,19 +726,7 @@ pub const MAX_BANDS: usize = 256;
 /// returns each emitter's band and each band's centroid (mean of its emitters; bands without
 /// emitters are dropped, so there may be fewer than asked). Precondition: `bands >= 1`.
 pub fn emitter_bands(centroids: &[DVec3], bands: usize) -> (Vec<usize>, Vec<DVec3>) {
-    let (lo, hi) = centroids.iter().fold(
-        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
-        |(lo, hi), &c| (lo.min(c), hi.max(c)),
-    );
-    let extent = hi - lo;
-    let axis = if extent.x >= extent.y && extent.x >= extent.z {
-        0
-    } else if extent.y >= extent.z {
-        1
-    } else {
-        2
-    };
-    let span = extent[axis];
+    let (lo, axis, span) = sweep_axis(centroids);
     let raw: Vec<usize> = centroids
         .iter()
         .map(|c| {
@@ -846,9 +892,7 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
     driver::check_outputs(&report_files, &args.scene.scene)?;
 
     let loaded = driver::load(&args.scene, &mut timings)?;
-    let emitters: Vec<usize> = (0..loaded.scene.len())
-        .filter(|&t| loaded.scene.is_emitter(t))
-        .collect();
+    let (emitters, centroids) = emitter_centroids(&loaded.scene);
     if emitters.is_empty() {
         return Err(Error::Scene {
             path: args.scene.scene.clone(),
@@ -878,13 +922,6 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
     }
 
     let base = loaded.scene.emission.clone();
-    let centroids: Vec<DVec3> = emitters
-        .iter()
-        .map(|&t| {
-            let [a, b, c] = loaded.scene.corners(t);
-            (a + b + c) / 3.0
-        })
-        .collect();
     let power = |emission: &[[f64; 3]]| -> f64 {
         emitters
             .iter()
@@ -894,18 +931,11 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
     let base_power = power(&base);
     // With --bands: one precomputed light per band of emitters, mixed per frame.
     let lights_start = Instant::now();
-    let bands = (args.bands > 0).then(|| emitter_bands(&centroids, args.bands));
-    if let Some((band, centres)) = &bands {
-        for k in 0..centres.len() {
-            let mut emission = vec![[0.0; 3]; base.len()];
-            for (&t, &b) in emitters.iter().zip(band) {
-                if b == k {
-                    emission[t] = base[t];
-                }
-            }
-            relighter.add_light(&format!("band {k}"), &emission)?;
-        }
-    }
+    let bands = if args.bands > 0 {
+        Some(relighter.add_band_lights(&emitters, &centroids, args.bands)?)
+    } else {
+        None
+    };
     let lights_seconds = lights_start.elapsed().as_secs_f64();
     let progress = Progress::new("relight", args.frames as u64, !args.quiet);
     let mut records = Vec::with_capacity(args.frames);
@@ -919,7 +949,7 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
                 }
                 (relighter.relight(&emission)?, emission)
             }
-            Some((_, centres)) => {
+            Some(centres) => {
                 // The spot's brightness at each band's centre, over the same span as the
                 // emitters (the centres are inside it).
                 let mut points = centres.clone();
@@ -989,7 +1019,7 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
                 }),
             )
             .insert("build_seconds", build_seconds)
-            .insert("bands", bands.as_ref().map_or(0, |(_, c)| c.len()))
+            .insert("bands", bands.as_ref().map_or(0, Vec::len))
             .insert("lights_seconds", lights_seconds)
             .insert(
                 "hierarchy",
@@ -1010,7 +1040,7 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
             &loaded,
             args,
             build_seconds,
-            bands.as_ref().map(|(_, c)| (c.len(), lights_seconds)),
+            bands.as_ref().map(|c| (c.len(), lights_seconds)),
             &summary
         )
     );
