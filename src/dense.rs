@@ -13,7 +13,10 @@ use crate::mesh::Patches;
 use crate::progress::Progress;
 use crate::solution::{Solution, SolveStats};
 use crate::solve::{finish, relative_change, Convergence, SolverOptions};
-use crate::transport::{couple, gather_entries, is_near, Coupling, Entry, PatchGeom};
+use crate::transport::{couple, gather_entries, is_near, Coupling, Entry, PatchGeom, Receiver};
+
+/// A receiver's cached near pairs: (sender, coupling).
+type NearList = Vec<(u32, Coupling)>;
 
 /// Solves the scene with the dense solver. Preconditions: `options.validate()` passed.
 ///
@@ -41,27 +44,40 @@ pub fn solve_dense(patches: &Patches, options: &SolverOptions, progress: &Progre
     };
     let mut convergence = Convergence::default();
 
-    // Near pairs: computed once, kept per receiver as (sender, entries).
-    let near: Vec<Vec<(u32, Coupling)>> = geoms
+    // Near pairs: computed once, kept per receiver as (sender, entries). Each receiver's
+    // quadrature is fixed by its nearest exchanging sender (one set of points per receiver).
+    let (receivers, near): (Vec<Option<Receiver>>, Vec<NearList>) = geoms
         .par_iter()
         .enumerate()
         .map(|(r, rg)| {
-            let Some(rg) = rg else { return Vec::new() };
+            let Some(rg) = rg else {
+                return (None, Vec::new());
+            };
+            let near_senders: Vec<usize> = active
+                .iter()
+                .copied()
+                .filter(|&s| {
+                    let sg = geoms[s].as_ref().expect("active patches have geometry");
+                    s != r && is_near(rg, sg, &bins, &params)
+                })
+                .collect();
+            let receiver = Receiver::for_senders(
+                *rg,
+                near_senders.iter().filter_map(|&s| geoms[s].as_ref()),
+                &params,
+            );
             let mut list = Vec::new();
             let mut coupling = Coupling::new();
-            for &s in &active {
+            for s in near_senders {
                 let sg = geoms[s].as_ref().expect("active patches have geometry");
-                if s == r || !is_near(rg, sg, &bins, &params) {
-                    continue;
-                }
-                couple(rg, sg, &bins, &params, &mut coupling);
+                couple(&receiver, sg, &bins, &params, &mut coupling);
                 if !coupling.is_empty() {
                     list.push((s as u32, coupling.clone()));
                 }
             }
-            list
+            (Some(receiver), list)
         })
-        .collect();
+        .unzip();
     stats.solver_bytes += near
         .iter()
         .map(|l| (l.len() * std::mem::size_of::<(u32, Coupling)>()) as u64)
@@ -74,7 +90,7 @@ pub fn solve_dense(patches: &Patches, options: &SolverOptions, progress: &Progre
             .zip(next_anti.par_chunks_mut(nb))
             .enumerate()
             .map(|(r, (b_out, a_out))| {
-                let Some(rg) = &geoms[r] else {
+                let Some(receiver) = &receivers[r] else {
                     *b_out = emission[r];
                     a_out.fill([0.0; 3]);
                     return (0.0, 0);
@@ -101,10 +117,10 @@ pub fn solve_dense(patches: &Patches, options: &SolverOptions, progress: &Progre
                 }
                 for &s in &active {
                     let sg = geoms[s].as_ref().expect("active patches have geometry");
-                    if s == r || is_near(rg, sg, &bins, &params) {
+                    if s == r || is_near(&receiver.geom, sg, &bins, &params) {
                         continue;
                     }
-                    couple(rg, sg, &bins, &params, &mut coupling);
+                    couple(receiver, sg, &bins, &params, &mut coupling);
                     if !coupling.is_empty() {
                         gather(s, &coupling);
                     }

@@ -6,7 +6,7 @@ use rayon::prelude::*;
 
 use crate::bins::Bins;
 use crate::hierarchy::ClusterTree;
-use crate::transport::{couple, Coupling, CouplingParams, Entry, PatchGeom};
+use crate::transport::{couple, Coupling, CouplingParams, Entry, PatchGeom, Receiver};
 
 /// Parameters of link refinement.
 #[derive(Clone, Copy, Debug)]
@@ -74,6 +74,33 @@ pub struct Links {
     pub exact_start: Vec<u32>,
     /// Pairs of nodes found to exchange nothing (kept only when `record_culled` was asked).
     pub culled: Vec<(u32, u32)>,
+    /// What refinement did (counts and times), for reports and profiling.
+    pub stats: LinkStats,
+}
+
+/// Counts and times of one refinement.
+#[derive(Clone, Debug, Default)]
+pub struct LinkStats {
+    /// Node pairs culled by the plane test.
+    pub culled_pairs: u64,
+    /// Leaf triangles split on demand.
+    pub leaf_splits: u64,
+    /// Exact pairs recorded during the traversal (before expanding split leaves).
+    pub exact_pairs: u64,
+    /// Exact pairs after expansion (element pairs coupled).
+    pub exact_element_pairs: u64,
+    /// Of those, pairs whose coupling turned out empty.
+    pub exact_empty: u64,
+    /// Exact pairs that overlap (gap <= 0 between the bounding spheres).
+    pub exact_touching: u64,
+    /// Exact pairs that are apart but failed the solid-angle test.
+    pub exact_apart: u64,
+    /// Seconds in the traversal.
+    pub traverse_seconds: f64,
+    /// Seconds computing exact couplings.
+    pub couple_seconds: f64,
+    /// Seconds assembling the arrays.
+    pub assemble_seconds: f64,
 }
 
 impl Links {
@@ -154,6 +181,8 @@ pub fn refine(
     coupling: &CouplingParams,
     record_culled: bool,
 ) -> Links {
+    let t_start = std::time::Instant::now();
+    let mut stats = LinkStats::default();
     let limit = params.epsilon * bins.mean_solid_angle();
     let mut cluster: Vec<ClusterLink> = Vec::new();
     let mut exact_pairs: Vec<(u32, u32)> = Vec::new();
@@ -181,6 +210,7 @@ pub fn refine(
             continue;
         }
         if culled(tree, s, r, coupling.two_sided) {
+            stats.culled_pairs += 1;
             if record_culled {
                 culled_pairs.push((s, r));
             }
@@ -220,6 +250,11 @@ pub fn refine(
         let r_can = !rn.is_leaf() || leaf_splittable(rn, sn);
         let split_s = match (s_can, r_can) {
             (false, false) => {
+                if gap > 0.0 {
+                    stats.exact_apart += 1;
+                } else {
+                    stats.exact_touching += 1;
+                }
                 exact_pairs.push((s, r));
                 continue;
             }
@@ -229,6 +264,7 @@ pub fn refine(
         };
         let node = if split_s { s } else { r };
         if tree.nodes[node as usize].is_leaf() {
+            stats.leaf_splits += 1;
             tree.split_leaf(node);
         }
         let n = &tree.nodes[node as usize];
@@ -238,6 +274,9 @@ pub fn refine(
     }
 
     tree.finalize();
+    stats.exact_pairs = exact_pairs.len() as u64;
+    let t_traversed = std::time::Instant::now();
+    stats.traverse_seconds = (t_traversed - t_start).as_secs_f64();
 
     // Cluster links grouped by receiver node.
     cluster.sort_unstable_by_key(|l| l.receiver);
@@ -250,63 +289,109 @@ pub fn refine(
     }
 
     // A leaf recorded in an exact pair may have been split afterwards (by another pair): the pair
-    // then stands for all pairs of elements below its two nodes.
+    // then stands for all pairs of elements below its two nodes. Pairs as (receiver element,
+    // sender element), grouped by receiver; each receiver integrates all its exact senders over
+    // one fixed set of points.
     let mut exact_pairs: Vec<(u32, u32)> = exact_pairs
         .into_iter()
         .flat_map(|(s, r)| {
             let (s0, s1) = tree.nodes[s as usize].elements;
             let (r0, r1) = tree.nodes[r as usize].elements;
-            let elements = &tree.elements;
-            (r0..r1).flat_map(move |re| {
-                (s0..s1).map(move |se| (elements[se as usize], elements[re as usize]))
-            })
+            (r0..r1).flat_map(move |re| (s0..s1).map(move |se| (re, se)))
         })
         .collect();
-
-    // Exact couplings, computed in parallel, grouped by receiver element.
-    let element_of = |node: u32| tree.nodes[node as usize].elements.0;
-    exact_pairs.sort_unstable_by_key(|&(s, r)| (element_of(r), element_of(s)));
-    let geom = |node: u32| {
-        let n = &tree.nodes[node as usize];
-        PatchGeom::new(n.corners, n.plane.map(|p| p.0).unwrap_or(glam::DVec3::Z))
-    };
-    let couplings: Vec<Coupling> = exact_pairs
-        .par_iter()
-        .map_init(Coupling::new, |scratch, &(s, r)| {
-            couple(&geom(r), &geom(s), bins, coupling, scratch);
-            scratch.clone()
-        })
-        .collect();
+    exact_pairs.sort_unstable();
     let n_elements = tree.elements.len();
+    let geoms: Vec<PatchGeom> = tree
+        .elements
+        .par_iter()
+        .map(|&node| {
+            let n = &tree.nodes[node as usize];
+            PatchGeom::new(n.corners, n.plane.map(|p| p.0).unwrap_or(glam::DVec3::Z))
+        })
+        .collect();
+    // Receivers' ranges in `exact_pairs`.
+    let mut pair_start = vec![0u32; n_elements + 1];
+    for &(r, _) in &exact_pairs {
+        pair_start[r as usize + 1] += 1;
+    }
+    for e in 0..n_elements {
+        pair_start[e + 1] += pair_start[e];
+    }
+    /// The exact links into one receiver: senders, entry counts, entries.
+    #[derive(Default)]
+    struct Row {
+        senders: Vec<u32>,
+        counts: Vec<u32>,
+        entries: Vec<Entry>,
+        empty: Vec<u32>,
+    }
+    let rows: Vec<Row> = (0..n_elements)
+        .into_par_iter()
+        .map_init(Coupling::new, |scratch, r| {
+            let pairs = &exact_pairs[pair_start[r] as usize..pair_start[r + 1] as usize];
+            let mut row = Row::default();
+            if pairs.is_empty() {
+                return row;
+            }
+            let receiver = Receiver::for_senders(
+                geoms[r],
+                pairs.iter().map(|&(_, s)| &geoms[s as usize]),
+                coupling,
+            );
+            for &(_, s) in pairs {
+                couple(&receiver, &geoms[s as usize], bins, coupling, scratch);
+                if scratch.is_empty() {
+                    row.empty.push(s);
+                    continue;
+                }
+                row.senders.push(s);
+                row.counts.push(scratch.len() as u32);
+                row.entries.extend_from_slice(scratch);
+            }
+            row
+        })
+        .collect();
+    drop(exact_pairs);
+    let t_coupled = std::time::Instant::now();
+    stats.couple_seconds = (t_coupled - t_traversed).as_secs_f64();
     let mut links = Links {
         cluster,
         cluster_start,
         exact_start: vec![0u32; n_elements + 1],
         ..Links::default()
     };
-    for (&(s, r), entries) in exact_pairs.iter().zip(&couplings) {
-        if entries.is_empty() {
-            if record_culled {
-                links.culled.push((s, r));
-            }
-            continue;
+    let n_exact: usize = rows.iter().map(|r| r.senders.len()).sum();
+    let n_entries: usize = rows.iter().map(|r| r.entries.len()).sum();
+    links.exact_sender.reserve_exact(n_exact);
+    links.exact_entry_start.reserve_exact(n_exact + 1);
+    links.exact_entries.reserve_exact(n_entries);
+    for (r, row) in rows.into_iter().enumerate() {
+        stats.exact_element_pairs += (row.senders.len() + row.empty.len()) as u64;
+        stats.exact_empty += row.empty.len() as u64;
+        if record_culled {
+            let (rn, en) = (tree.elements[r], &tree.elements);
+            links
+                .culled
+                .extend(row.empty.iter().map(|&s| (en[s as usize], rn)));
         }
-        links
-            .exact_entry_start
-            .push(links.exact_entries.len() as u32);
-        links.exact_entries.extend_from_slice(entries);
-        links.exact_sender.push(element_of(s));
-        links.exact_start[element_of(r) as usize + 1] += 1;
+        let mut start = links.exact_entries.len() as u32;
+        for (&s, &count) in row.senders.iter().zip(&row.counts) {
+            links.exact_entry_start.push(start);
+            links.exact_sender.push(s);
+            start += count;
+        }
+        links.exact_entries.extend_from_slice(&row.entries);
+        links.exact_start[r + 1] = links.exact_start[r] + row.senders.len() as u32;
     }
     links
         .exact_entry_start
         .push(links.exact_entries.len() as u32);
-    for e in 0..n_elements {
-        links.exact_start[e + 1] += links.exact_start[e];
-    }
     if record_culled {
         links.culled.extend(culled_pairs);
     }
+    stats.assemble_seconds = t_coupled.elapsed().as_secs_f64();
+    links.stats = stats;
     links
 }
 

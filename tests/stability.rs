@@ -660,15 +660,12 @@ fn albedo_0999_converges_or_says_it_stopped() {
     }
 }
 
-/// The same box with each face split into 2 x 2 squares: the exact answer is still 1000 E, but
-/// both solvers converge (and say so) to about 1535 E: the receiver quadrature is chosen per
-/// pair (4 x 4 points for some senders, 6 x 6 for others), so a receiver's form factors no
-/// longer sum to exactly 1 (largest row sum 1.00064), and 1 / (1 - rho) amplifies that 0.06%
-/// into +53%. With one receiver rule per receiver (`near_quadrature` 1, 2 or 3 here) the row
-/// sums are 1 to 1e-8 and B = 999. Root cause in src/transport.rs (`couple`,
-/// `receiver_quadrature`), see docs/stability.md.
+/// The same box with each face split into 2 x 2 squares: the exact answer is still 1000 E.
+/// Each receiver integrates all its near senders over one fixed set of points
+/// (`transport::Receiver`), so its form factors sum to 1 (to rounding) in this closed box.
+/// When the points were chosen per pair (4 x 4 for some senders, 6 x 6 for others), rows summed
+/// to up to 1.00064 and 1 / (1 - rho) amplified that into B = 1535 (+53%).
 #[test]
-#[ignore = "solver side: per-pair receiver quadrature in transport::couple breaks the partition of unity (row sums 1.00064), amplified 1/(1-rho) = 1000x at albedo 0.999"]
 fn albedo_0999_subdivided_box() {
     let scene = scenes::subdivide(&scenes::furnace_box(1.0, 0.999), 2);
     let options = SolverOptions {
