@@ -15,6 +15,7 @@ use std::time::Instant;
 use glam::DVec3;
 use rayon::prelude::*;
 
+use crate::accelerate::Anderson;
 use crate::bins::Bins;
 use crate::hierarchy::{ClusterTree, NONE};
 use crate::links::{self, ClusterLink, LinkParams, Links};
@@ -344,6 +345,34 @@ impl Prepared {
             ..SolveStats::default()
         };
         let mut convergence = Convergence::default();
+        // Anderson acceleration when its history fits its budget; its residuals shrink faster
+        // than the plain sweep's contraction, so the remaining error is estimated with the
+        // largest albedo as the contraction bound instead.
+        let state_len = (n + slots) * C;
+        let depth = options.acceleration_depth;
+        let mut anderson = (depth > 0
+            && Anderson::bytes(state_len, depth) <= ACCELERATION_BUDGET_BYTES)
+            .then(|| {
+                let mut weight = Vec::with_capacity(state_len);
+                for &a in &self.elem_area {
+                    weight.extend(std::iter::repeat_n(a, C));
+                }
+                for e in 0..n {
+                    let w = self.elem_area[e] / nb as f64;
+                    let k = (live.start[e + 1] - live.start[e]) as usize * C;
+                    weight.extend(std::iter::repeat_n(w, k));
+                }
+                Anderson::new(depth, weight)
+            });
+        if anderson.is_some() {
+            let rho = albedo
+                .iter()
+                .flat_map(|a| a.iter().copied())
+                .fold(0.0f64, f64::max);
+            convergence.contraction_bound = Some(rho);
+            stats.extrapolations = 0;
+        }
+        let (mut x_flat, mut g_flat) = (Vec::new(), Vec::new());
         let tree = &self.tree;
         let links = &self.links;
         let bins = &self.bins;
@@ -495,11 +524,22 @@ impl Prepared {
                 stats.converged = true;
                 break;
             }
-            // Once the sweeps contract at a steady ratio, jump over the geometric tail.
-            if let Some(k) = convergence.extrapolation_factor() {
-                extrapolate(&mut radiance, &next_radiance, k);
-                extrapolate(&mut anti, &next_anti, k);
-                stats.extrapolations += 1;
+            match anderson.as_mut() {
+                // Anderson: the next state mixes the last sweeps' outputs.
+                Some(acc) => {
+                    pack(&next_radiance, &next_anti, &mut x_flat);
+                    pack(&radiance, &anti, &mut g_flat);
+                    acc.step(&mut x_flat, &g_flat);
+                    unpack(&x_flat, &mut radiance, &mut anti);
+                }
+                // Else, once the sweeps contract at a steady ratio, jump over the geometric tail.
+                None => {
+                    if let Some(k) = convergence.extrapolation_factor() {
+                        extrapolate(&mut radiance, &next_radiance, k);
+                        extrapolate(&mut anti, &next_anti, k);
+                        stats.extrapolations += 1;
+                    }
+                }
             }
         }
         stats.residual = convergence.residual;
@@ -1183,6 +1223,30 @@ impl LiveBins {
     }
 }
 
+/// Most memory the Anderson history may take; above it the solver extrapolates the tail instead.
+const ACCELERATION_BUDGET_BYTES: u64 = 512 << 20;
+
+/// Radiance and antiradiance state as one flat vector (radiance first, then the antiradiance
+/// slots in order).
+fn pack<const C: usize>(radiance: &[[f64; C]], anti: &[[f32; C]], out: &mut Vec<f64>) {
+    out.clear();
+    out.extend(radiance.iter().flatten());
+    out.extend(anti.iter().flatten().map(|&x| x as f64));
+}
+
+/// The inverse of [`pack`].
+fn unpack<const C: usize>(flat: &[f64], radiance: &mut [[f64; C]], anti: &mut [[f32; C]]) {
+    let (b, a) = flat.split_at(radiance.len() * C);
+    for (dst, src) in radiance.iter_mut().zip(b.chunks_exact(C)) {
+        dst.copy_from_slice(src);
+    }
+    for (dst, src) in anti.iter_mut().zip(a.chunks_exact(C)) {
+        for c in 0..C {
+            dst[c] = src[c] as f32;
+        }
+    }
+}
+
 /// `x += k (x - x_previous)`, element-wise.
 fn extrapolate<const C: usize, T>(x: &mut [[T; C]], x_previous: &[[T; C]], k: f64)
 where
@@ -1246,6 +1310,8 @@ mod tests {
                 bins,
                 two_sided,
                 max_iterations: 20,
+                // Plain sweeps: bins stored but never read would still steer Anderson's mixing.
+                acceleration_depth: 0,
                 ..SolverOptions::default()
             };
             let mut pruned = Prepared::new(&patches, &options, false);

@@ -8,6 +8,7 @@
 // `!(x > 0.0)` is used on purpose: it is also true for NaN, which must be rejected too.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod accelerate;
 pub mod bins;
 pub mod dense;
 pub mod direct;

@@ -44,6 +44,10 @@ pub struct SolverOptions {
     /// computes them on the fly every sweep instead, with the same result. 8 bytes per pair;
     /// 0 disables it. 1024 by default.
     pub pair_cache_mb: usize,
+    /// Anderson acceleration of the hierarchical solver's sweeps: how many past sweeps each new
+    /// state mixes ([`crate::accelerate`]). 0 gives plain Jacobi sweeps with the tail
+    /// extrapolation. 1..8; 4 by default. The dense solver (the oracle) always sweeps plainly.
+    pub acceleration_depth: usize,
 }
 
 impl Default for SolverOptions {
@@ -67,6 +71,7 @@ impl SolverOptions {
             split_depth: 4,
             direct_light: false,
             pair_cache_mb: 1024,
+            acceleration_depth: 4,
         }
     }
 
@@ -172,6 +177,10 @@ pub struct Convergence {
     pub residual: f64,
     /// Last estimate of the remaining relative error.
     pub error_estimate: f64,
+    /// When set, the contraction ratio used for the error estimate is at least this (an
+    /// accelerated iteration's residual ratios understate the plain iteration's, which is what
+    /// turns a residual into an error: e = (I - T)^-1 f). The largest albedo bounds it.
+    pub contraction_bound: Option<f64>,
 }
 
 impl Convergence {
@@ -187,6 +196,7 @@ impl Convergence {
         }
         self.since_extrapolation += 1;
         self.previous = Some(residual);
+        let q = q.max(self.contraction_bound.unwrap_or(0.0)).min(0.9999);
         self.error_estimate = if residual == 0.0 {
             0.0
         } else {
