@@ -32,6 +32,7 @@ pub mod scene;
 pub mod scenes;
 pub mod solution;
 pub mod solve;
+pub mod stage;
 pub mod sweep;
 pub mod transport;
 

@@ -28,6 +28,9 @@ enum Command {
     Relight(antiradiance::relight::RelightArgs),
     /// Measure time and error against the path tracer over a grid of solver knobs.
     Sweep(antiradiance::sweep::SweepArgs),
+    /// Write a generated scene (OBJ + MTL): the Cornell box, a mesh in a closed room, a mesh
+    /// under an area light.
+    Scene(antiradiance::stage::StageArgs),
 }
 
 fn main() -> ExitCode {
@@ -42,6 +45,7 @@ fn main() -> ExitCode {
         Command::Compare(args) => driver::compare(args),
         Command::Relight(args) => antiradiance::relight::relight(args),
         Command::Sweep(args) => antiradiance::sweep::sweep(args),
+        Command::Scene(args) => antiradiance::stage::stage(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

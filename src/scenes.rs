@@ -11,13 +11,15 @@
 //! functions), so their output, and the files [`write_obj`] makes of it, are identical on every
 //! platform. The committed files in `scenes/` are checked against them by `tests/scenes.rs`.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::fmt::Write as _;
-use std::path::Path;
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
 
 use glam::DVec3;
 
 use crate::error::{Error, Result};
+use crate::output::write_atomic;
 use crate::scene::Scene;
 
 /// Cornell box white reflectance (floor, ceiling, back wall, blocks), RGB.
@@ -56,6 +58,10 @@ struct Builder {
     corners: Vec<[DVec3; 3]>,
     albedo: Vec<[f64; 3]>,
     emission: Vec<[f64; 3]>,
+    /// Material name of each triangle (`None` for the unnamed generators).
+    names: Vec<Option<&'static str>>,
+    /// Name given to the triangles added from now on.
+    current: Option<&'static str>,
 }
 
 impl Builder {
@@ -63,6 +69,12 @@ impl Builder {
         self.corners.push(tri);
         self.albedo.push(albedo);
         self.emission.push(emission);
+        self.names.push(self.current);
+    }
+
+    /// Names the material of the triangles added from now on.
+    fn name(&mut self, name: &'static str) {
+        self.current = Some(name);
     }
 
     /// Adds a quad as `(q0, q1, q2), (q0, q2, q3)`, with the vertex order reversed first when
@@ -429,19 +441,314 @@ pub fn subdivided_cornell_box(target_triangles: usize) -> Scene {
     subdivide(&cornell_box(), k)
 }
 
+/// Floor albedo (grey) of the room [`in_room`] builds.
+pub const ROOM_FLOOR_ALBEDO: f64 = 0.6;
+/// Wall and ceiling albedo (grey) of the room [`in_room`] builds.
+pub const ROOM_WALL_ALBEDO: f64 = 0.7;
+/// Default emitted radiance (grey, W/(m^2 sr)) of the lights [`in_room`] and [`under_light`]
+/// add (the `scene` command's `--light-radiance`).
+pub const DEFAULT_LIGHT_RADIANCE: f64 = 10.0;
+/// Number of triangles [`in_room`] adds after the object's: floor, ceiling (with the light as
+/// its centre cell) and four walls, each a 3 x 3 grid of quads.
+pub const ROOM_TRIANGLES: usize = 108;
+/// Number of triangles [`under_light`] adds after the mesh's: one rectangle.
+pub const LIGHT_TRIANGLES: usize = 2;
+/// Material name given to an object's triangles that have no material of their own, in
+/// [`in_room`] and [`under_light`] (made unique if the object already uses it).
+pub const OBJECT_MATERIAL: &str = "object";
+
+/// The room [`in_room`] builds around an object, in the object's units and frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Room {
+    /// Lowest corner of the room's box: `min.y` is the floor, the object's lowest y.
+    pub min: DVec3,
+    /// Highest corner: `max.y` is the ceiling.
+    pub max: DVec3,
+    /// The light's rectangle in the ceiling (y = `max.y`), lowest (x, z) corner.
+    pub light_min: DVec3,
+    /// The light's rectangle, highest (x, z) corner.
+    pub light_max: DVec3,
+}
+
+/// Width and depth of the object's axis-aligned bounds (x and z extents), its height (y extent)
+/// and the largest of the three; an error when all three are 0 or not finite.
+fn extents(object: &Scene, what: &str) -> Result<(DVec3, DVec3, f64)> {
+    if object.is_empty() {
+        return Err(Error::Parameter(format!(
+            "{what}: the object has no triangles"
+        )));
+    }
+    let (lo, hi) = object.bounds();
+    let size = hi - lo;
+    let largest = size.max_element();
+    if !(lo.is_finite() && hi.is_finite() && largest > 0.0) {
+        return Err(Error::Parameter(format!(
+            "{what}: the object's bounds {lo} .. {hi} have no extent or are not finite"
+        )));
+    }
+    Ok((lo, hi, largest))
+}
+
+/// The room [`in_room`] puts around `object`: a box standing on the object's lowest point,
+/// centred on its bounds in x and z.
+///
+/// With the object's bounds of width `sx`, height `sy` and depth `sz` (scene units), the room
+/// is `w = max(3 max(sx, sz), 1.5 sy)` wide and deep and `h = max(2 sy, w / 2)` high; the floor is
+/// at the object's lowest y, so the object stands on it. The light is the square of side `w / 4`
+/// at the centre of the ceiling.
+///
+/// Errors: [`Error::Parameter`] for an object without triangles or whose bounds have no extent
+/// (every vertex at one point) or are not finite.
+pub fn room_around(object: &Scene) -> Result<Room> {
+    let (lo, hi, _) = extents(object, "in_room")?;
+    let size = hi - lo;
+    let w = (3.0 * size.x.max(size.z)).max(1.5 * size.y);
+    let h = (2.0 * size.y).max(0.5 * w);
+    let c = (lo + hi) * 0.5;
+    let (half, light_half) = (0.5 * w, 0.125 * w);
+    Ok(Room {
+        min: DVec3::new(c.x - half, lo.y, c.z - half),
+        max: DVec3::new(c.x + half, lo.y + h, c.z + half),
+        light_min: DVec3::new(c.x - light_half, lo.y + h, c.z - light_half),
+        light_max: DVec3::new(c.x + light_half, lo.y + h, c.z + light_half),
+    })
+}
+
+/// Places `object` standing on the floor of a closed box room lit by a rectangular area light
+/// in the ceiling.
+///
+/// The object is kept as it is (same triangles, order, corners bit for bit, albedo, emission
+/// and material names; triangles without a material are named [`OBJECT_MATERIAL`]): its
+/// triangles are `0..object.len()` of the result. The room ([`room_around`]) follows:
+/// [`ROOM_TRIANGLES`] triangles, each of its six faces a 3 x 3 grid of quads (two triangles
+/// each) facing the inside, the floor first (material `room_floor`, albedo
+/// [`ROOM_FLOOR_ALBEDO`]), then the ceiling's eight outer cells (`room_ceiling`,
+/// [`ROOM_WALL_ALBEDO`]), the light (`room_light`: the ceiling's centre cell, facing down,
+/// albedo 0, emitted radiance `light_radiance` grey, in W/(m^2 sr)), then the walls at the
+/// lowest x, highest x, lowest z and highest z (`room_wall`, [`ROOM_WALL_ALBEDO`]). Neighbouring
+/// cells share their corners exactly, so the room is a closed, consistently oriented mesh
+/// (every edge shared by two of its triangles, traversed in opposite directions). The result has
+/// no path and no warnings.
+///
+/// The object's emitters, if any, keep emitting; the room adds the one light.
+///
+/// Errors: [`Error::Parameter`] when `light_radiance` is not finite and > 0, and those of
+/// [`room_around`].
+pub fn in_room(object: &Scene, light_radiance: f64) -> Result<Scene> {
+    check_radiance(light_radiance)?;
+    let room = room_around(object)?;
+    let (lo, hi) = (room.min, room.max);
+    let xs = [lo.x, room.light_min.x, room.light_max.x, hi.x];
+    let zs = [lo.z, room.light_min.z, room.light_max.z, hi.z];
+    let ys = [
+        lo.y,
+        lerp_steps(lo.y, hi.y, 1, 3),
+        lerp_steps(lo.y, hi.y, 2, 3),
+        hi.y,
+    ];
+    let centre = (lo + hi) * 0.5;
+    let floor = [ROOM_FLOOR_ALBEDO; 3];
+    let wall = [ROOM_WALL_ALBEDO; 3];
+    let black = [0.0; 3];
+    let light = [light_radiance; 3];
+    let mut b = Builder::default();
+    // A cell of the grid over `us` x `vs` in the plane `axis = level`, facing the room's centre.
+    let cell = |b: &mut Builder,
+                axis: usize,
+                level: f64,
+                (us, i): (&[f64; 4], usize),
+                (vs, j): (&[f64; 4], usize),
+                albedo: [f64; 3],
+                emission: [f64; 3]| {
+        let point = |u: f64, v: f64| {
+            let mut p = [0.0; 3];
+            p[axis] = level;
+            p[(axis + 1) % 3] = u;
+            p[(axis + 2) % 3] = v;
+            DVec3::from_array(p)
+        };
+        let q = [
+            point(us[i], vs[j]),
+            point(us[i + 1], vs[j]),
+            point(us[i + 1], vs[j + 1]),
+            point(us[i], vs[j + 1]),
+        ];
+        let mid = (q[0] + q[1] + q[2] + q[3]) * 0.25;
+        let mut facing = DVec3::ZERO;
+        facing[axis] = centre[axis] - mid[axis];
+        b.quad(q, facing, albedo, emission);
+    };
+    // Planes y = level: axis 1, u = z, v = x. Planes x = level: axis 0, u = y, v = z. Planes
+    // z = level: axis 2, u = x, v = y.
+    b.name("room_floor");
+    for j in 0..3 {
+        for i in 0..3 {
+            cell(&mut b, 1, lo.y, (&zs, i), (&xs, j), floor, black);
+        }
+    }
+    b.name("room_ceiling");
+    for j in 0..3 {
+        for i in 0..3 {
+            if (i, j) != (1, 1) {
+                cell(&mut b, 1, hi.y, (&zs, i), (&xs, j), wall, black);
+            }
+        }
+    }
+    b.name("room_light");
+    cell(&mut b, 1, hi.y, (&zs, 1), (&xs, 1), black, light);
+    b.name("room_wall");
+    for level in [lo.x, hi.x] {
+        for j in 0..3 {
+            for i in 0..3 {
+                cell(&mut b, 0, level, (&ys, i), (&zs, j), wall, black);
+            }
+        }
+    }
+    for level in [lo.z, hi.z] {
+        for j in 0..3 {
+            for i in 0..3 {
+                cell(&mut b, 2, level, (&xs, i), (&ys, j), wall, black);
+            }
+        }
+    }
+    debug_assert_eq!(b.corners.len(), ROOM_TRIANGLES);
+    Ok(append(object, b))
+}
+
+/// The light [`under_light`] puts above `object`, as its (lowest, highest) corners: a horizontal
+/// rectangle centred over the object's bounds.
+///
+/// With the bounds of width `sx`, height `sy`, depth `sz` and largest extent `m` (scene units),
+/// the rectangle is `max(sx / 2, m / 10)` by `max(sz / 2, m / 10)` (half the footprint, never a
+/// sliver) at `1.5 max(sy, m / 10)` above the object's top.
+///
+/// Errors: [`Error::Parameter`] for an object without triangles or whose bounds have no extent
+/// or are not finite.
+pub fn light_above(object: &Scene) -> Result<(DVec3, DVec3)> {
+    let (lo, hi, m) = extents(object, "under_light")?;
+    let size = hi - lo;
+    let c = (lo + hi) * 0.5;
+    let half_x = 0.5 * (0.5 * size.x).max(0.1 * m);
+    let half_z = 0.5 * (0.5 * size.z).max(0.1 * m);
+    let y = hi.y + 1.5 * size.y.max(0.1 * m);
+    Ok((
+        DVec3::new(c.x - half_x, y, c.z - half_z),
+        DVec3::new(c.x + half_x, y, c.z + half_z),
+    ))
+}
+
+/// Puts a rectangular area light above `object`, facing down, and keeps everything else.
+///
+/// The object is kept as it is (triangles `0..object.len()`: same order, corners bit for bit,
+/// albedo, emission and material names; triangles without a material are named
+/// [`OBJECT_MATERIAL`]); the light ([`light_above`]) follows as [`LIGHT_TRIANGLES`] triangles of
+/// material `light`: albedo 0, emitted radiance `light_radiance` grey (W/(m^2 sr)). Nothing
+/// closes the scene: light that misses the object leaves it. The result has no path and no
+/// warnings.
+///
+/// Errors: [`Error::Parameter`] when `light_radiance` is not finite and > 0, and those of
+/// [`light_above`].
+pub fn under_light(object: &Scene, light_radiance: f64) -> Result<Scene> {
+    check_radiance(light_radiance)?;
+    let (a, c) = light_above(object)?;
+    let mut b = Builder::default();
+    b.name("light");
+    b.quad(
+        [a, DVec3::new(c.x, a.y, a.z), c, DVec3::new(a.x, a.y, c.z)],
+        DVec3::new(0.0, -1.0, 0.0),
+        [0.0; 3],
+        [light_radiance; 3],
+    );
+    Ok(append(object, b))
+}
+
+fn check_radiance(light_radiance: f64) -> Result<()> {
+    if light_radiance.is_finite() && light_radiance > 0.0 {
+        Ok(())
+    } else {
+        Err(Error::Parameter(format!(
+            "light radiance {light_radiance} must be finite and > 0"
+        )))
+    }
+}
+
+/// `object` followed by the builder's triangles, with material names: the object's own, or
+/// [`OBJECT_MATERIAL`]; the builder's names, made distinct from the object's.
+fn append(object: &Scene, extra: Builder) -> Scene {
+    let mut names: Vec<String> = object.material_names.clone();
+    let object_names: HashSet<&str> = object.material_names.iter().map(String::as_str).collect();
+    let mut fresh: HashMap<&str, u32> = HashMap::new();
+    let mut fresh_index = |names: &mut Vec<String>, name: &'static str| -> u32 {
+        *fresh.entry(name).or_insert_with(|| {
+            let mut unique = name.to_string();
+            let mut k = 2;
+            while object_names.contains(unique.as_str()) {
+                unique = format!("{name}_{k}");
+                k += 1;
+            }
+            names.push(unique);
+            (names.len() - 1) as u32
+        })
+    };
+    let mut material = Vec::with_capacity(object.len() + extra.corners.len());
+    for t in 0..object.len() {
+        let own = object
+            .material
+            .get(t)
+            .copied()
+            .flatten()
+            .filter(|&m| (m as usize) < object.material_names.len());
+        material.push(Some(match own {
+            Some(m) => m,
+            None => fresh_index(&mut names, OBJECT_MATERIAL),
+        }));
+    }
+    for name in &extra.names {
+        material.push(name.map(|n| fresh_index(&mut names, n)));
+    }
+    let mut positions = object.positions.clone();
+    let mut triangles = object.triangles.clone();
+    for tri in &extra.corners {
+        let base = positions.len() as u32;
+        positions.extend_from_slice(tri);
+        triangles.push([base, base + 1, base + 2]);
+    }
+    let mut albedo = object.albedo.clone();
+    albedo.extend_from_slice(&extra.albedo);
+    let mut emission = object.emission.clone();
+    emission.extend_from_slice(&extra.emission);
+    Scene {
+        path: PathBuf::new(),
+        positions,
+        triangles,
+        albedo,
+        emission,
+        material,
+        material_names: names,
+        warnings: Vec::new(),
+    }
+}
+
 /// Writes `scene` as an OBJ file at `obj_path` plus an MTL file next to it (same name, extension
 /// `mtl`), so that [`crate::scene::load_obj`] with default options gives back the same triangles
 /// in the same order with the same albedo and emission.
 ///
 /// Vertices are shared between triangles where their coordinates are bit-identical; numbers are
 /// written in Rust's shortest round-trip form, so they read back exactly. There is one material
-/// per distinct (albedo, emission) pair, named `m0`, `m1`, ... in order of first use, each with a
-/// `Kd` and a `Ke` line, and `usemtl` switches wherever the material changes. `title` becomes
-/// comment lines at the top of both files. The output depends only on the scene and the title.
+/// per distinct (material name, albedo, emission), each with a `Kd` and a `Ke` line, and
+/// `usemtl` switches wherever the material changes. A material is named after the scene's own
+/// material name ([`Scene::material_name`]; whitespace and `#` become `_`) and `m0`, `m1`, ...
+/// (its position in order of first use) when the triangle has none; a name already taken by an
+/// earlier material gets a suffix `_2`, `_3`, ... `title` becomes comment lines at the top of
+/// both files. The output depends only on the scene and the title.
+///
+/// Each file is written atomically (a temporary file in the same directory, renamed once
+/// complete), the MTL file first: a failure leaves no partial file, and when the OBJ file
+/// cannot be written an MTL file this call created is removed again.
 ///
 /// Errors: [`Error::Parameter`] for an empty scene, a non-finite vertex, albedo outside [0, 1),
 /// negative or non-finite emission, or an `obj_path` without a file name or ending in `.mtl`;
-/// [`Error::Io`] when a file cannot be written.
+/// [`Error::Io`] (one line naming the file) when a file cannot be written.
 pub fn write_obj(scene: &Scene, obj_path: &Path, title: &str) -> Result<()> {
     if scene.is_empty() {
         return Err(Error::Parameter(
@@ -508,10 +815,13 @@ pub fn write_obj(scene: &Scene, obj_path: &Path, title: &str) -> Result<()> {
     }
 
     // Materials in order of first use.
-    type Key = [u64; 6];
+    type Key<'a> = (Option<&'a str>, [u64; 6]);
     let key = |t: usize| -> Key {
         let (a, e) = (scene.albedo[t], scene.emission[t]);
-        [a[0], a[1], a[2], e[0], e[1], e[2]].map(f64::to_bits)
+        (
+            scene.material_name(t),
+            [a[0], a[1], a[2], e[0], e[1], e[2]].map(f64::to_bits),
+        )
     };
     let mut material_of: HashMap<Key, usize> = HashMap::new();
     let mut materials: Vec<usize> = Vec::new(); // first triangle using each material
@@ -523,6 +833,25 @@ pub fn write_obj(scene: &Scene, obj_path: &Path, title: &str) -> Result<()> {
         });
         tri_material.push(m);
     }
+    let mut taken = HashSet::new();
+    let material_names: Vec<String> = materials
+        .iter()
+        .enumerate()
+        .map(|(m, &t)| {
+            let base = scene
+                .material_name(t)
+                .map(|n| n.replace(|c: char| c.is_whitespace() || c == '#', "_"))
+                .filter(|n| !n.is_empty())
+                .unwrap_or_else(|| format!("m{m}"));
+            let mut name = base.clone();
+            let mut k = 2;
+            while !taken.insert(name.clone()) {
+                name = format!("{base}_{k}");
+                k += 1;
+            }
+            name
+        })
+        .collect();
 
     // Vertices in order of first use, shared when bit-identical.
     let mut vertex_of: HashMap<[u64; 3], u32> = HashMap::new();
@@ -548,7 +877,7 @@ pub fn write_obj(scene: &Scene, obj_path: &Path, title: &str) -> Result<()> {
     );
     for (m, &t) in materials.iter().enumerate() {
         let (a, e) = (scene.albedo[t], scene.emission[t]);
-        let _ = writeln!(mtl, "\nnewmtl m{m}");
+        let _ = writeln!(mtl, "\nnewmtl {}", material_names[m]);
         let _ = writeln!(mtl, "Kd {} {} {}", a[0], a[1], a[2]);
         let _ = writeln!(mtl, "Ke {} {} {}", e[0], e[1], e[2]);
     }
@@ -569,12 +898,18 @@ pub fn write_obj(scene: &Scene, obj_path: &Path, title: &str) -> Result<()> {
     for (t, f) in faces.iter().enumerate() {
         if tri_material[t] != current {
             current = tri_material[t];
-            let _ = writeln!(obj, "usemtl m{current}");
+            let _ = writeln!(obj, "usemtl {}", material_names[current]);
         }
         let _ = writeln!(obj, "f {} {} {}", f[0], f[1], f[2]);
     }
 
-    std::fs::write(&mtl_path, mtl).map_err(|e| Error::io(&mtl_path, e))?;
-    std::fs::write(obj_path, obj).map_err(|e| Error::io(obj_path, e))?;
+    let mtl_existed = mtl_path.exists();
+    write_atomic(&mtl_path, |w| w.write_all(mtl.as_bytes()))?;
+    if let Err(e) = write_atomic(obj_path, |w| w.write_all(obj.as_bytes())) {
+        if !mtl_existed {
+            let _ = std::fs::remove_file(&mtl_path);
+        }
+        return Err(e);
+    }
     Ok(())
 }
