@@ -53,6 +53,11 @@ use crate::transport::{separation, PatchGeom, FAR_RATIO};
 /// clamped to [`MIN_SHADOW_SAMPLES`]..=[`MAX_SHADOW_SAMPLES`] per receiver).
 pub const SHADOW_RAY_BUDGET: usize = 2_000_000;
 
+/// Most unoccluded form-factor terms (receivers x emitter groups) a direct-light pass may cost;
+/// above it the solvers skip exact direct light (and say so): a scene whose every triangle is
+/// a separate emitter would otherwise pay receivers x emitters form factors.
+pub const DIRECT_LIGHT_BUDGET: u64 = 200_000_000;
+
 /// Fewest shadow samples per receiving element (a square, for stratification).
 pub const MIN_SHADOW_SAMPLES: usize = 64;
 
@@ -406,6 +411,12 @@ impl<'a> DirectLight<'a> {
             .collect()
     }
 
+    /// True when `receivers` receivers would cost more than [`DIRECT_LIGHT_BUDGET`] unoccluded
+    /// form-factor terms against the emitter groups.
+    pub fn over_budget(&self, receivers: usize) -> bool {
+        receivers as u64 * self.group_count() as u64 > DIRECT_LIGHT_BUDGET
+    }
+
     /// Number of emitter groups (see [`EmitterGroup`]); at most the number of emitters.
     pub fn group_count(&self) -> usize {
         self.groups.len()
@@ -680,7 +691,13 @@ pub fn solve_hierarchical_direct(
 ) -> Solution {
     let mut prepared = Prepared::new(patches, options, false);
     let receivers: Vec<Element> = prepared.elements().collect();
-    let source = DirectLight::new(patches, receivers.len()).reflected(&receivers, progress);
+    let direct = DirectLight::new(patches, receivers.len());
+    if direct.over_budget(receivers.len()) {
+        let (mut solution, _) = prepared.solve(patches, progress);
+        solution.stats.direct_light_skipped = true;
+        return solution;
+    }
+    let source = direct.reflected(&receivers, progress);
     let (reflected, state) = prepared.solve_with_source(patches, &source, None, progress);
     // `reflected` is R clamped and scaled; B is formed from the unclamped element values.
     let radiance = add_emission(patches, &receivers, state.radiance());
@@ -696,7 +713,13 @@ pub fn solve_dense_direct(
     progress: &Progress,
 ) -> Solution {
     let receivers = patch_receivers(patches);
-    let source = DirectLight::new(patches, receivers.len()).reflected(&receivers, progress);
+    let direct = DirectLight::new(patches, receivers.len());
+    if direct.over_budget(receivers.len()) {
+        let mut solution = dense::solve_dense(patches, options, progress);
+        solution.stats.direct_light_skipped = true;
+        return solution;
+    }
+    let source = direct.reflected(&receivers, progress);
     let mut with_source = patches.clone();
     with_source.emission = vec![[0.0; 3]; patches.len()];
     for (r, d) in receivers.iter().zip(&source) {
@@ -785,5 +808,24 @@ mod tests {
                 "patch {p}: grouped {grouped} vs members {member_sum}"
             );
         }
+    }
+}
+
+#[cfg(test)]
+mod budget_tests {
+    use super::*;
+    use crate::mesh::build_patches;
+    use crate::scenes;
+
+    #[test]
+    fn direct_light_budget_counts_receivers_times_groups() {
+        let patches = build_patches(&scenes::cornell_box(), None);
+        let direct = DirectLight::new(&patches, patches.len());
+        let groups = direct.group_count() as u64;
+        assert!(groups >= 1);
+        assert!(!direct.over_budget(patches.len()));
+        let limit = (DIRECT_LIGHT_BUDGET / groups) as usize;
+        assert!(!direct.over_budget(limit));
+        assert!(direct.over_budget(limit + 1));
     }
 }

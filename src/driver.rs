@@ -186,9 +186,12 @@ pub struct SolverArgs {
     #[arg(long)]
     pub keep_negative: bool,
     /// Exact direct light: the first bounce from the emitters with shadow rays, antiradiance
-    /// for the indirect bounces only.
-    #[arg(long)]
+    /// for the indirect bounces only (on by default in the default and accurate presets).
+    #[arg(long, conflicts_with = "no_direct_light")]
     pub direct_light: bool,
+    /// No exact direct light: antiradiance for every bounce (the fast preset's choice).
+    #[arg(long)]
+    pub no_direct_light: bool,
 }
 
 impl SolverArgs {
@@ -213,7 +216,12 @@ impl SolverArgs {
         options.two_sided = self.two_sided_antiradiance;
         options.antiradiance = !self.no_antiradiance;
         options.clamp_negative = !self.keep_negative;
-        options.direct_light = self.direct_light;
+        if self.direct_light {
+            options.direct_light = true;
+        }
+        if self.no_direct_light {
+            options.direct_light = false;
+        }
         options.validate()?;
         Ok(options)
     }
@@ -573,6 +581,17 @@ pub fn run_solver(
     solution
 }
 
+/// The warning for a solve that was asked for exact direct light but skipped it because the
+/// scene's emitters were over [`direct::DIRECT_LIGHT_BUDGET`] (`None` otherwise).
+pub fn direct_light_warning(stats: &SolveStats, options: &SolverOptions) -> Option<String> {
+    (options.direct_light && stats.direct_light_skipped).then(|| {
+        format!(
+            "exact direct light skipped: receivers x emitter groups is over {:.0e}; antiradiance carried every bounce (--no-direct-light silences this)",
+            direct::DIRECT_LIGHT_BUDGET as f64
+        )
+    })
+}
+
 /// The warning for a solve that stopped at the iteration cap (`None` when it converged): the
 /// solver, the iterations, the last residual against the tolerance and, since the residual
 /// underestimates the remaining error when the iteration contracts slowly, an estimate of that
@@ -771,13 +790,16 @@ pub fn solve(args: &SolveArgs) -> Result<()> {
     let solution = timed(&mut timings.solve, || {
         run_solver(args.solver, &loaded.patches, &options, args.quiet)
     });
-    let cap = cap_warning(
+    let cap: Vec<String> = cap_warning(
         args.solver.name(),
         &solution.stats,
         &options,
         &loaded.patches,
-    );
-    if let Some(w) = &cap {
+    )
+    .into_iter()
+    .chain(direct_light_warning(&solution.stats, &options))
+    .collect();
+    for w in &cap {
         eprintln!("warning: {w}");
     }
     timed(&mut timings.output, || {
@@ -931,7 +953,10 @@ pub fn compare(args: &CompareArgs) -> Result<()> {
             run_solver(kind, &loaded.patches, &options, args.quiet)
         });
         timings.solve += seconds;
-        if let Some(w) = cap_warning(kind.name(), &solution.stats, &options, &loaded.patches) {
+        let warnings = cap_warning(kind.name(), &solution.stats, &options, &loaded.patches)
+            .into_iter()
+            .chain(direct_light_warning(&solution.stats, &options));
+        for w in warnings {
             eprintln!("warning: {w}");
             cap_warnings.push(w);
         }

@@ -36,6 +36,9 @@ pub struct SolveStats {
     /// Seconds per stage of the hierarchical solver (tree, links, model, iterate); `None` for
     /// the dense solver and the path tracer.
     pub stage_seconds: Option<crate::hierarchical::HierarchyTimings>,
+    /// True when exact direct light was asked for but skipped: the scene's emitters would cost
+    /// more than [`crate::direct::DIRECT_LIGHT_BUDGET`] unoccluded form factors.
+    pub direct_light_skipped: bool,
 }
 
 /// A solved scene.

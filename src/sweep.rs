@@ -299,7 +299,7 @@ impl SweepArgs {
         for preset in presets.iter().map(|p| p.resolve(Preset::Default)) {
             let base = SolverOptions::preset(preset.name())?;
             for d in &direct {
-                let direct_light = d.resolve(false);
+                let direct_light = d.resolve(base.direct_light);
                 for b in &bins {
                     for e in &epsilon {
                         for t in &tol {

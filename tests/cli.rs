@@ -307,11 +307,38 @@ fn explicit_options_override_the_preset() {
     assert_eq!(so["two_sided"], true);
     assert_eq!(so["clamp_negative"], false);
     assert_eq!(so["antiradiance"], true);
+    assert_eq!(so["direct_light"], true, "the accurate preset's");
     assert_eq!(r["parameters"]["scene_options"]["albedo"], 0.5);
     assert_eq!(r["parameters"]["scene_options"]["max_edge"], 0.5);
     // --max-edge 0.5 splits the floor (edges 2 and 2.83) into 6 x 6 pieces per triangle.
     assert!(r["counts"]["patches"].as_u64().unwrap() > 7, "{r}");
     assert_eq!(r["counts"]["input_triangles"], 7);
+}
+
+#[test]
+fn direct_light_follows_the_preset_unless_told() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = tiny_scene(dir.path());
+    let report = dir.path().join("r.json");
+    for (flags, expected) in [
+        (&[][..], true),
+        (&["--preset", "fast"][..], false),
+        (&["--no-direct-light"][..], false),
+        (&["--preset", "fast", "--direct-light"][..], true),
+    ] {
+        let mut args = vec!["solve", s(&scene), "--report", s(&report), "--quiet"];
+        args.extend_from_slice(flags);
+        let o = run(&args);
+        assert!(o.status.success(), "{flags:?}: {}", stderr(&o));
+        let r = read_json(&report);
+        assert_eq!(
+            r["parameters"]["solver_options"]["direct_light"], expected,
+            "{flags:?}"
+        );
+        assert_eq!(r["stats"]["direct_light_skipped"], false, "{flags:?}");
+    }
+    let o = run(&["solve", s(&scene), "--direct-light", "--no-direct-light"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
 }
 
 #[test]
