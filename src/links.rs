@@ -16,7 +16,9 @@ pub struct LinkParams {
     /// 0 forces every link down to element pairs (the dense solver's couplings).
     pub epsilon: f64,
     /// Smallest bounding-sphere radius (unit frame: scene diameter 1) a triangle is split down
-    /// to when a near neighbour needs it finer. 0.005..0.05; 0.01 by default.
+    /// to when a near neighbour needs it finer. 0.005..0.05; 0.02 by default (0.01 split the
+    /// bear's graded mesh into twice its triangles for no measurable accuracy: 5.1M links,
+    /// error 6.19%; 0.02: 3.25M links, same error, same room and Cornell box errors).
     pub min_radius: f64,
     /// Most times one patch may be split in four. 0..6; 4 by default (256 pieces).
     pub max_split_depth: u8,
@@ -24,15 +26,21 @@ pub struct LinkParams {
     /// link with each element's own direction and distance, so their extent costs little
     /// accuracy. 1..8; 4 by default.
     pub receiver_factor: f64,
+    /// Two leaf triangles at least `leaf_gap / epsilon` receiver diameters apart (gap between
+    /// their bounding spheres) are tested with their exact solid angles instead of their
+    /// bounding spheres': such pairs become cluster links (the receiver's single point
+    /// integrates them well) instead of costly exact couplings. Default 1.
+    pub leaf_gap: f64,
 }
 
 impl Default for LinkParams {
     fn default() -> Self {
         LinkParams {
             epsilon: 0.5,
-            min_radius: 0.01,
+            min_radius: 0.02,
             max_split_depth: 4,
             receiver_factor: 4.0,
+            leaf_gap: 1.0,
         }
     }
 }
@@ -137,6 +145,15 @@ fn sphere_solid_angle(r: f64, d: f64) -> f64 {
     2.0 * std::f64::consts::PI * (1.0 - (1.0 - s * s).sqrt())
 }
 
+/// Largest solid angle leaf triangle `to` subtends at the corners and centroid of leaf `from`.
+fn most_solid_angle(from: &crate::hierarchy::Node, to: &crate::hierarchy::Node) -> f64 {
+    let mut w = crate::geometry::solid_angle(from.centroid, &to.corners);
+    for c in from.corners {
+        w = w.max(crate::geometry::solid_angle(c, &to.corners));
+    }
+    w
+}
+
 /// True when nothing can travel from S to R: S lies entirely in or behind the plane of every
 /// triangle of R (front-only antiradiance; the plane of a flat R, the normal cone and height of a
 /// curved one), or S and R are flat in one plane (either mode).
@@ -238,8 +255,21 @@ pub fn refine(
         let d = (rn.center - sn.center).length();
         let gap = d - sn.radius - rn.radius;
         if params.epsilon > 0.0 && gap > 0.0 {
-            let omega_s = sphere_solid_angle(sn.radius, d - rn.radius);
-            let omega_r = sphere_solid_angle(rn.radius, d - sn.radius);
+            let (omega_s, omega_r) = if sn.is_leaf()
+                && rn.is_leaf()
+                && gap * params.epsilon >= params.leaf_gap * 2.0 * rn.radius
+            {
+                // Two triangles at least leaf_gap / epsilon receiver diameters apart: the
+                // receiver's one point integrates the exchange well (finer epsilon asks more), and the triangles' own solid angles (largest
+                // over the other's corners and centroid) replace the bounding spheres' (which
+                // overestimate a triangle's by 2.4x or more).
+                (most_solid_angle(rn, sn), most_solid_angle(sn, rn))
+            } else {
+                (
+                    sphere_solid_angle(sn.radius, d - rn.radius),
+                    sphere_solid_angle(rn.radius, d - sn.radius),
+                )
+            };
             if omega_s <= limit && omega_r <= params.receiver_factor * limit {
                 let w = (rn.centroid - sn.centroid).normalize_or_zero();
                 cluster.push(ClusterLink {
