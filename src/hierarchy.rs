@@ -46,6 +46,15 @@ pub struct Node {
     pub corners: Tri,
     /// Elements below this node, `elements.0 .. elements.1` (set by [`ClusterTree::finalize`]).
     pub elements: (u32, u32),
+    /// Cone of the normals below: unit axis (zero when the normals cancel out).
+    pub cone_axis: DVec3,
+    /// Cosine of the cone's half-angle: every normal below `n` has `n . cone_axis >= cone_cos`
+    /// (-1: no bound).
+    pub cone_cos: f64,
+    /// Largest height of `center` above the plane of any triangle below,
+    /// `max_t (n_t . center - n_t . v_t)`: with the cone it bounds from above the height of any
+    /// point above every triangle's plane (see [`ClusterTree::behind_all`]).
+    pub height: f64,
 }
 
 impl Node {
@@ -90,6 +99,9 @@ fn leaf_node(corners: Tri, patch: u32, parent: u32, split_depth: u8) -> Node {
         split_depth,
         corners,
         elements: (0, 0),
+        cone_axis: normal,
+        cone_cos: 1.0,
+        height: 0.0,
     }
 }
 
@@ -177,7 +189,78 @@ impl ClusterTree {
             }
         }
         tree.refit_all();
+        tree.compute_cones();
         tree
+    }
+
+    /// Sets every cluster's normal cone and height from the triangles below it (the leaves are
+    /// the patches: pieces split later share their patch's plane, so ancestors' bounds hold).
+    fn compute_cones(&mut self) {
+        // Area-weighted normal sums, bottom-up (children have larger indices than parents).
+        let mut sums = vec![DVec3::ZERO; self.nodes.len()];
+        for i in (0..self.nodes.len()).rev() {
+            let n = &self.nodes[i];
+            if n.is_leaf() {
+                sums[i] = n.cone_axis * n.area;
+            }
+            if n.parent != NONE {
+                let s = sums[i];
+                sums[n.parent as usize] += s;
+            }
+        }
+        for (i, n) in self.nodes.iter_mut().enumerate() {
+            if !n.is_leaf() {
+                n.cone_axis = sums[i].normalize_or_zero();
+                n.cone_cos = 1.0;
+                n.height = f64::NEG_INFINITY;
+            }
+        }
+        // Every leaf widens the cones and heights of its ancestors.
+        for i in 0..self.nodes.len() {
+            if !self.nodes[i].is_leaf() {
+                continue;
+            }
+            let Some((n, d)) = self.nodes[i].plane else {
+                continue;
+            };
+            let mut a = self.nodes[i].parent;
+            while a != NONE {
+                let node = &mut self.nodes[a as usize];
+                let cos = if node.cone_axis == DVec3::ZERO {
+                    -1.0
+                } else {
+                    node.cone_axis.dot(n)
+                };
+                node.cone_cos = node.cone_cos.min(cos);
+                node.height = node.height.max(n.dot(node.center) - d);
+                a = node.parent;
+            }
+        }
+    }
+
+    /// True when every point of node `s`'s bounding sphere lies in or behind the plane of every
+    /// triangle below node `r` (within `tol`): nothing leaving `s` reaches the front of anything
+    /// in `r`. Conservative: false when it cannot be shown.
+    pub fn behind_all(&self, s: u32, r: u32, tol: f64) -> bool {
+        let (sn, rn) = (&self.nodes[s as usize], &self.nodes[r as usize]);
+        if rn.cone_cos <= -1.0 {
+            return false;
+        }
+        // For a triangle t below r with normal n_t and a point y of s's sphere:
+        // n_t . y - d_t = n_t . (c_s - c_r) + n_t . (y - c_s) + (n_t . c_r - d_t)
+        //              <= max over the cone of n . D   +   r_s   +   height(r).
+        let dv = sn.center - rn.center;
+        let len = dv.length();
+        let max_dot = if len > 0.0 {
+            // Angle between the axis and D, minus the cone's half-angle, clamped at 0.
+            let cos_theta = (rn.cone_axis.dot(dv) / len).clamp(-1.0, 1.0);
+            let (theta, alpha) = (cos_theta.acos(), rn.cone_cos.clamp(-1.0, 1.0).acos());
+            // Safety margin for the rounding of acos.
+            len * (theta - alpha - 1e-9).max(0.0).cos()
+        } else {
+            0.0
+        };
+        max_dot + sn.radius + rn.height <= tol
     }
 
     /// Recomputes every cluster's bounds, sphere, area and plane from its children (bottom-up).
@@ -306,5 +389,72 @@ impl ClusterTree {
             }
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::build_patches;
+    use crate::scene::Scene;
+
+    /// A UV sphere with outward normals (a curved, closed mesh) and a few flat quads.
+    fn curved_scene() -> Scene {
+        let (nu, nv) = (12, 8);
+        let p = |i: usize, j: usize| {
+            let (u, v) = (
+                i as f64 / nu as f64 * std::f64::consts::TAU,
+                j as f64 / nv as f64 * std::f64::consts::PI,
+            );
+            DVec3::new(v.sin() * u.cos(), v.cos(), v.sin() * u.sin())
+        };
+        let mut tris = Vec::new();
+        for i in 0..nu {
+            for j in 0..nv {
+                let (a, b, c, d) = (p(i, j), p(i + 1, j), p(i + 1, j + 1), p(i, j + 1));
+                for t in [[a, b, c], [a, c, d]] {
+                    if geometry::area(&t) > 1e-9 {
+                        tris.push(t);
+                    }
+                }
+            }
+        }
+        // A floor under the sphere, facing up.
+        let f = |x: f64, z: f64| DVec3::new(x, -1.5, z);
+        tris.push([f(-2.0, -2.0), f(-2.0, 2.0), f(2.0, 2.0)]);
+        tris.push([f(-2.0, -2.0), f(2.0, 2.0), f(2.0, -2.0)]);
+        let n = tris.len();
+        Scene::from_triangles(&tris, &vec![[0.5; 3]; n], &vec![[0.0; 3]; n])
+    }
+
+    #[test]
+    fn behind_all_is_conservative() {
+        let patches = build_patches(&curved_scene(), None);
+        let mut tree = ClusterTree::build(&patches);
+        tree.finalize();
+        tree.validate().unwrap();
+        let leaves: Vec<u32> = tree.elements.clone();
+
+        let mut culled = 0;
+        for r in 0..tree.nodes.len() as u32 {
+            for s in 0..tree.nodes.len() as u32 {
+                if s == r || !tree.behind_all(s, r, 0.0) {
+                    continue;
+                }
+                culled += 1;
+                let (r0, r1) = tree.nodes[r as usize].elements;
+                let (s0, s1) = tree.nodes[s as usize].elements;
+                for &re in &leaves[r0 as usize..r1 as usize] {
+                    let (n, d) = tree.nodes[re as usize].plane.unwrap();
+                    for &se in &leaves[s0 as usize..s1 as usize] {
+                        for c in tree.nodes[se as usize].corners {
+                            assert!(n.dot(c) - d <= 1e-12, "node {s} is not behind node {r}");
+                        }
+                    }
+                }
+            }
+        }
+        // The test is useful: on a sphere, far sides are behind each other.
+        assert!(culled > 1000, "{culled}");
     }
 }

@@ -16,7 +16,9 @@ pub struct LinkParams {
     /// 0 forces every link down to element pairs (the dense solver's couplings).
     pub epsilon: f64,
     /// Smallest bounding-sphere radius (unit frame: scene diameter 1) a triangle is split down
-    /// to when a near neighbour needs it finer. 0.005..0.05; 0.01 by default.
+    /// to when a near neighbour needs it finer. 0.005..0.05; 0.02 by default (0.01 split the
+    /// bear's graded mesh into twice its triangles for no measurable accuracy: 5.1M links,
+    /// error 6.19%; 0.02: 3.25M links, same error, same room and Cornell box errors).
     pub min_radius: f64,
     /// Most times one patch may be split in four. 0..6; 4 by default (256 pieces).
     pub max_split_depth: u8,
@@ -24,15 +26,21 @@ pub struct LinkParams {
     /// link with each element's own direction and distance, so their extent costs little
     /// accuracy. 1..8; 4 by default.
     pub receiver_factor: f64,
+    /// Two leaf triangles at least `leaf_gap / epsilon` receiver diameters apart (gap between
+    /// their bounding spheres) are tested with their exact solid angles instead of their
+    /// bounding spheres': such pairs become cluster links (the receiver's single point
+    /// integrates them well) instead of costly exact couplings. Default 1.
+    pub leaf_gap: f64,
 }
 
 impl Default for LinkParams {
     fn default() -> Self {
         LinkParams {
             epsilon: 0.5,
-            min_radius: 0.01,
+            min_radius: 0.02,
             max_split_depth: 4,
             receiver_factor: 4.0,
+            leaf_gap: 1.0,
         }
     }
 }
@@ -95,6 +103,10 @@ pub struct LinkStats {
     pub exact_touching: u64,
     /// Exact pairs that are apart but failed the solid-angle test.
     pub exact_apart: u64,
+    /// Receivers of exact links by quadrature points per side (index q - 1, last bin q >= 8).
+    pub receivers_by_quadrature: [u64; 8],
+    /// Receiver points integrated over all exact couplings (a far pair counts 1).
+    pub quadrature_points: u64,
     /// Seconds in the traversal.
     pub traverse_seconds: f64,
     /// Seconds computing exact couplings.
@@ -133,29 +145,52 @@ fn sphere_solid_angle(r: f64, d: f64) -> f64 {
     2.0 * std::f64::consts::PI * (1.0 - (1.0 - s * s).sqrt())
 }
 
-/// True when nothing can travel from S to R: R is flat and S lies entirely in or behind its plane
-/// (front-only antiradiance), or S and R are flat in one plane (either mode).
+/// Largest solid angle leaf triangle `to` subtends at the corners and centroid of leaf `from`.
+fn most_solid_angle(from: &crate::hierarchy::Node, to: &crate::hierarchy::Node) -> f64 {
+    let mut w = crate::geometry::solid_angle(from.centroid, &to.corners);
+    for c in from.corners {
+        w = w.max(crate::geometry::solid_angle(c, &to.corners));
+    }
+    w
+}
+
+/// True when nothing can travel from S to R: S lies entirely in or behind the plane of every
+/// triangle of R (front-only antiradiance; the plane of a flat R, the normal cone and height of a
+/// curved one), or S and R are flat in one plane (either mode).
 fn culled(tree: &ClusterTree, s: u32, r: u32, two_sided: bool) -> bool {
     let (sn, rn) = (&tree.nodes[s as usize], &tree.nodes[r as usize]);
-    let Some((n, d)) = rn.plane else { return false };
     let tol = crate::geometry::PLANE_EPS * (sn.radius + rn.radius);
-    // Largest signed distance of S's bounds to R's plane.
-    let (lo, hi) = sn.bounds;
+    let Some((n, d)) = rn.plane else {
+        // A curved receiver: culled when S lies behind the plane of every triangle of R (its
+        // normal cone and height bound that), front-only mode.
+        return !two_sided && tree.behind_all(s, r, tol);
+    };
+    // Largest and smallest signed distance of S to R's plane: from S's corners when S is a
+    // triangle, else from its bounds and sphere.
     let mut max_dist = f64::NEG_INFINITY;
     let mut min_dist = f64::INFINITY;
-    for k in 0..8 {
-        let corner = glam::DVec3::new(
-            if k & 1 == 0 { lo.x } else { hi.x },
-            if k & 2 == 0 { lo.y } else { hi.y },
-            if k & 4 == 0 { lo.z } else { hi.z },
-        );
-        let dist = n.dot(corner) - d;
-        max_dist = max_dist.max(dist);
-        min_dist = min_dist.min(dist);
+    if sn.is_leaf() {
+        for c in sn.corners {
+            let dist = n.dot(c) - d;
+            max_dist = max_dist.max(dist);
+            min_dist = min_dist.min(dist);
+        }
+    } else {
+        let (lo, hi) = sn.bounds;
+        for k in 0..8 {
+            let corner = glam::DVec3::new(
+                if k & 1 == 0 { lo.x } else { hi.x },
+                if k & 2 == 0 { lo.y } else { hi.y },
+                if k & 4 == 0 { lo.z } else { hi.z },
+            );
+            let dist = n.dot(corner) - d;
+            max_dist = max_dist.max(dist);
+            min_dist = min_dist.min(dist);
+        }
+        let sphere_dist = n.dot(sn.center) - d;
+        max_dist = max_dist.min(sphere_dist + sn.radius);
+        min_dist = min_dist.max(sphere_dist - sn.radius);
     }
-    let sphere_dist = n.dot(sn.center) - d;
-    let max_dist = max_dist.min(sphere_dist + sn.radius);
-    let min_dist = min_dist.max(sphere_dist - sn.radius);
     if max_dist <= tol && (!two_sided || min_dist >= -tol) {
         return true;
     }
@@ -220,8 +255,21 @@ pub fn refine(
         let d = (rn.center - sn.center).length();
         let gap = d - sn.radius - rn.radius;
         if params.epsilon > 0.0 && gap > 0.0 {
-            let omega_s = sphere_solid_angle(sn.radius, d - rn.radius);
-            let omega_r = sphere_solid_angle(rn.radius, d - sn.radius);
+            let (omega_s, omega_r) = if sn.is_leaf()
+                && rn.is_leaf()
+                && gap * params.epsilon >= params.leaf_gap * 2.0 * rn.radius
+            {
+                // Two triangles at least leaf_gap / epsilon receiver diameters apart: the
+                // receiver's one point integrates the exchange well (finer epsilon asks more), and the triangles' own solid angles (largest
+                // over the other's corners and centroid) replace the bounding spheres' (which
+                // overestimate a triangle's by 2.4x or more).
+                (most_solid_angle(rn, sn), most_solid_angle(sn, rn))
+            } else {
+                (
+                    sphere_solid_angle(sn.radius, d - rn.radius),
+                    sphere_solid_angle(rn.radius, d - sn.radius),
+                )
+            };
             if omega_s <= limit && omega_r <= params.receiver_factor * limit {
                 let w = (rn.centroid - sn.centroid).normalize_or_zero();
                 cluster.push(ClusterLink {
@@ -325,6 +373,8 @@ pub fn refine(
         counts: Vec<u32>,
         entries: Vec<Entry>,
         empty: Vec<u32>,
+        q: usize,
+        points: u64,
     }
     let rows: Vec<Row> = (0..n_elements)
         .into_par_iter()
@@ -339,7 +389,9 @@ pub fn refine(
                 pairs.iter().map(|&(_, s)| &geoms[s as usize]),
                 coupling,
             );
+            row.q = receiver.quadrature();
             for &(_, s) in pairs {
+                row.points += receiver.points_for(&geoms[s as usize]) as u64;
                 couple(&receiver, &geoms[s as usize], bins, coupling, scratch);
                 if scratch.is_empty() {
                     row.empty.push(s);
@@ -369,6 +421,10 @@ pub fn refine(
     for (r, row) in rows.into_iter().enumerate() {
         stats.exact_element_pairs += (row.senders.len() + row.empty.len()) as u64;
         stats.exact_empty += row.empty.len() as u64;
+        if row.q > 0 {
+            stats.receivers_by_quadrature[(row.q - 1).min(7)] += 1;
+        }
+        stats.quadrature_points += row.points;
         if record_culled {
             let (rn, en) = (tree.elements[r], &tree.elements);
             links

@@ -69,7 +69,7 @@ impl SolverOptions {
             two_sided: false,
             antiradiance: true,
             clamp_negative: true,
-            near_quadrature: 6,
+            near_quadrature: 4,
             epsilon: 1.0,
             split_depth: 4,
             direct_light: true,
@@ -96,6 +96,7 @@ impl SolverOptions {
             bins: 12,
             tol: 3e-4,
             epsilon: 0.25,
+            near_quadrature: 6,
             ..SolverOptions::default_preset()
         }
     }

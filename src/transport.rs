@@ -167,6 +167,28 @@ fn spread_part(
     } else {
         (pieces_needed.sqrt().ceil() as usize).min(8)
     };
+    if m > 1 {
+        // Within one octant a bin is a convex spherical polygon, and the directions from x to
+        // the part form the spherical triangle of its corners' directions: when the three
+        // corners lie in one bin and one octant, so does the whole part, and every piece would
+        // land in that bin.
+        let cell = |v: DVec3| {
+            let w = x - v;
+            let octant =
+                u8::from(w.x >= 0.0) | u8::from(w.y >= 0.0) << 1 | u8::from(w.z >= 0.0) << 2;
+            (bins.bin_of(w), octant)
+        };
+        let c0 = cell(part[0]);
+        if cell(part[1]) == c0 && cell(part[2]) == c0 {
+            let f = if with_ff {
+                geometry::point_form_factor(x, n_x, part)
+            } else {
+                0.0
+            };
+            add_point_bin(acc, c0.0 as u16, f, omega);
+            return;
+        }
+    }
     for piece in geometry::subdivide(part, m) {
         let w = if m == 1 {
             omega
@@ -232,17 +254,16 @@ impl Spread {
     }
 }
 
-/// Exact form factor and solid angle of the triangles of `poly` seen from `x` (normal `n_x`).
+/// Exact form factor (when `with_ff`) and solid angle of `poly` seen from `x` (normal `n_x`).
 fn poly_ff_omega(x: DVec3, n_x: DVec3, poly: &Poly, with_ff: bool) -> (f64, f64) {
-    let mut f = 0.0;
-    let mut w = 0.0;
-    for part in poly.triangles() {
-        if with_ff {
-            f += geometry::point_form_factor(x, n_x, &part);
-        }
-        w += geometry::solid_angle(x, &part);
+    if with_ff {
+        geometry::poly_form_factor_solid_angle(x, n_x, poly)
+    } else {
+        (
+            0.0,
+            poly.triangles().map(|t| geometry::solid_angle(x, &t)).sum(),
+        )
     }
-    (f, w)
 }
 
 /// True when anything can travel from `s` to `r`: part of `s` lies strictly in front of `r`'s
@@ -334,6 +355,15 @@ impl Receiver {
     /// Points per side of the quadrature of near senders.
     pub fn quadrature(&self) -> usize {
         self.q
+    }
+
+    /// Receiver points [`couple`] integrates the sender `s` over.
+    pub fn points_for(&self, s: &PatchGeom) -> usize {
+        if self.q == 1 || separation(&self.geom, s) > FAR_RATIO {
+            1
+        } else {
+            self.points.len()
+        }
     }
 }
 
