@@ -252,11 +252,18 @@ impl ClusterTree {
         let dv = sn.center - rn.center;
         let len = dv.length();
         let max_dot = if len > 0.0 {
-            // Angle between the axis and D, minus the cone's half-angle, clamped at 0.
+            // cos(max(0, theta - alpha)), theta the angle between the axis and D, alpha the
+            // cone's half-angle: 1 when D is inside the cone, else cos(theta - alpha).
             let cos_theta = (rn.cone_axis.dot(dv) / len).clamp(-1.0, 1.0);
-            let (theta, alpha) = (cos_theta.acos(), rn.cone_cos.clamp(-1.0, 1.0).acos());
-            // Safety margin for the rounding of acos.
-            len * (theta - alpha - 1e-9).max(0.0).cos()
+            let cos_alpha = rn.cone_cos.clamp(-1.0, 1.0);
+            if cos_theta >= cos_alpha {
+                len
+            } else {
+                let sin_theta = (1.0 - cos_theta * cos_theta).sqrt();
+                let sin_alpha = (1.0 - cos_alpha * cos_alpha).sqrt();
+                // Safety margin for rounding.
+                len * ((cos_theta * cos_alpha + sin_theta * sin_alpha) + 1e-9).min(1.0)
+            }
         } else {
             0.0
         };

@@ -255,22 +255,22 @@ pub fn refine(
         let d = (rn.center - sn.center).length();
         let gap = d - sn.radius - rn.radius;
         if params.epsilon > 0.0 && gap > 0.0 {
-            let (omega_s, omega_r) = if sn.is_leaf()
-                && rn.is_leaf()
-                && gap * params.epsilon >= params.leaf_gap * 2.0 * rn.radius
-            {
-                // Two triangles at least leaf_gap / epsilon receiver diameters apart: the
-                // receiver's one point integrates the exchange well (finer epsilon asks more), and the triangles' own solid angles (largest
-                // over the other's corners and centroid) replace the bounding spheres' (which
-                // overestimate a triangle's by 2.4x or more).
-                (most_solid_angle(rn, sn), most_solid_angle(sn, rn))
-            } else {
-                (
-                    sphere_solid_angle(sn.radius, d - rn.radius),
-                    sphere_solid_angle(rn.radius, d - sn.radius),
-                )
+            let small = |omega_s: f64, omega_r: f64| {
+                omega_s <= limit && omega_r <= params.receiver_factor * limit
             };
-            if omega_s <= limit && omega_r <= params.receiver_factor * limit {
+            // Two triangles at least leaf_gap / epsilon receiver diameters apart: the receiver's
+            // one point integrates the exchange well (finer epsilon asks more), and the
+            // triangles' own solid angles (largest over the other's corners and centroid)
+            // replace the bounding spheres' (which overestimate a triangle's by 2.4x or more;
+            // the sphere test is tried first: it is cheaper and implies the exact one).
+            let leaf_pair = sn.is_leaf()
+                && rn.is_leaf()
+                && gap * params.epsilon >= params.leaf_gap * 2.0 * rn.radius;
+            if small(
+                sphere_solid_angle(sn.radius, d - rn.radius),
+                sphere_solid_angle(rn.radius, d - sn.radius),
+            ) || (leaf_pair && small(most_solid_angle(rn, sn), most_solid_angle(sn, rn)))
+            {
                 let w = (rn.centroid - sn.centroid).normalize_or_zero();
                 cluster.push(ClusterLink {
                     sender: s,
