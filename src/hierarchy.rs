@@ -242,14 +242,47 @@ impl ClusterTree {
     /// triangle below node `r` (within `tol`): nothing leaving `s` reaches the front of anything
     /// in `r`. Conservative: false when it cannot be shown.
     pub fn behind_all(&self, s: u32, r: u32, tol: f64) -> bool {
-        let (sn, rn) = (&self.nodes[s as usize], &self.nodes[r as usize]);
+        let sn = &self.nodes[s as usize];
+        self.sphere_behind_all(sn.center, sn.radius, r, tol)
+    }
+
+    /// True when point `p` lies strictly behind the plane of every triangle below node `r`, by
+    /// more than `tol`: the normal-cone bound first, then, for nodes of at most `max_leaves`
+    /// leaves, each leaf's plane. Conservative: false when it cannot be shown.
+    pub fn point_behind_all(&self, p: DVec3, r: u32, tol: f64, max_leaves: usize) -> bool {
+        if self.sphere_behind_all(p, 0.0, r, -tol) {
+            return true;
+        }
+        let mut stack: smallvec::SmallVec<[u32; 16]> = smallvec::smallvec![r];
+        let mut leaves = 0;
+        while let Some(i) = stack.pop() {
+            let n = &self.nodes[i as usize];
+            if n.is_leaf() {
+                leaves += 1;
+                if leaves > max_leaves {
+                    return false;
+                }
+                match n.plane {
+                    Some((normal, d)) if normal.dot(p) - d < -tol => {}
+                    _ => return false,
+                }
+            } else {
+                stack.extend(n.first_child..n.first_child + n.child_count as u32);
+            }
+        }
+        true
+    }
+
+    /// [`Self::behind_all`] for a sphere given by centre and radius.
+    fn sphere_behind_all(&self, center: DVec3, radius: f64, r: u32, tol: f64) -> bool {
+        let rn = &self.nodes[r as usize];
         if rn.cone_cos <= -1.0 {
             return false;
         }
-        // For a triangle t below r with normal n_t and a point y of s's sphere:
+        // For a triangle t below r with normal n_t and a point y of the sphere (c_s, r_s):
         // n_t . y - d_t = n_t . (c_s - c_r) + n_t . (y - c_s) + (n_t . c_r - d_t)
         //              <= max over the cone of n . D   +   r_s   +   height(r).
-        let dv = sn.center - rn.center;
+        let dv = center - rn.center;
         let len = dv.length();
         let max_dot = if len > 0.0 {
             // cos(max(0, theta - alpha)), theta the angle between the axis and D, alpha the
@@ -267,7 +300,7 @@ impl ClusterTree {
         } else {
             0.0
         };
-        max_dot + sn.radius + rn.height <= tol
+        max_dot + radius + rn.height <= tol
     }
 
     /// Recomputes every cluster's bounds, sphere, area and plane from its children (bottom-up).

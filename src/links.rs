@@ -91,6 +91,9 @@ pub struct Links {
 pub struct LinkStats {
     /// Node pairs culled by the plane test.
     pub culled_pairs: u64,
+    /// Cluster links dropped because they carry nothing to any receiving element (front-only:
+    /// the sender's centroid is behind every receiving triangle).
+    pub silent_links: u64,
     /// Leaf triangles split on demand.
     pub leaf_splits: u64,
     /// Exact pairs recorded during the traversal (before expanding split leaves).
@@ -271,6 +274,24 @@ pub fn refine(
                 sphere_solid_angle(rn.radius, d - sn.radius),
             ) || (leaf_pair && small(most_solid_angle(rn, sn), most_solid_angle(sn, rn)))
             {
+                // Receivers evaluate a cluster link at their elements' centroids with the
+                // direction from the sender's centroid, and (front-only) take nothing that
+                // arrives at their back: a link whose sender centroid lies behind every plane
+                // below the receiver adds exactly nothing. Such links are dropped (as culled).
+                if !coupling.two_sided
+                    && tree.point_behind_all(
+                        sn.centroid,
+                        r,
+                        crate::geometry::PLANE_EPS * (sn.radius + rn.radius),
+                        16,
+                    )
+                {
+                    stats.silent_links += 1;
+                    if record_culled {
+                        culled_pairs.push((s, r));
+                    }
+                    continue;
+                }
                 let w = (rn.centroid - sn.centroid).normalize_or_zero();
                 cluster.push(ClusterLink {
                     sender: s,
