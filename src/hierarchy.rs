@@ -253,6 +253,11 @@ impl ClusterTree {
         if self.sphere_behind_all(p, 0.0, r, -tol) {
             return true;
         }
+        let rn = &self.nodes[r as usize];
+        if rn.plane.is_some() || rn.cone_cos >= 1.0 {
+            // One normal below r: the bound is already the largest height over the planes.
+            return false;
+        }
         let mut stack: smallvec::SmallVec<[u32; 16]> = smallvec::smallvec![r];
         let mut leaves = 0;
         while let Some(i) = stack.pop() {
