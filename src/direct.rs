@@ -58,6 +58,11 @@ pub const SHADOW_RAY_BUDGET: usize = 2_000_000;
 /// a separate emitter would otherwise pay receivers x emitters form factors.
 pub const DIRECT_LIGHT_BUDGET: u64 = 200_000_000;
 
+/// Most shadow rays a direct-light pass may need at [`MIN_SHADOW_SAMPLES`] per receiver; above
+/// it (more than half a million receivers) the solvers skip exact direct light (and say so): on
+/// a 1M-triangle box the pass alone took longer than the whole antiradiance solve.
+pub const MAX_SHADOW_RAYS: u64 = 32_000_000;
+
 /// Fewest shadow samples per receiving element (a square, for stratification).
 pub const MIN_SHADOW_SAMPLES: usize = 64;
 
@@ -412,9 +417,11 @@ impl<'a> DirectLight<'a> {
     }
 
     /// True when `receivers` receivers would cost more than [`DIRECT_LIGHT_BUDGET`] unoccluded
-    /// form-factor terms against the emitter groups.
+    /// form-factor terms against the emitter groups, or more than [`MAX_SHADOW_RAYS`] shadow
+    /// rays at the fewest samples per receiver.
     pub fn over_budget(&self, receivers: usize) -> bool {
         receivers as u64 * self.group_count() as u64 > DIRECT_LIGHT_BUDGET
+            || receivers as u64 * MIN_SHADOW_SAMPLES as u64 > MAX_SHADOW_RAYS
     }
 
     /// Number of emitter groups (see [`EmitterGroup`]); at most the number of emitters.
@@ -824,7 +831,8 @@ mod budget_tests {
         let groups = direct.group_count() as u64;
         assert!(groups >= 1);
         assert!(!direct.over_budget(patches.len()));
-        let limit = (DIRECT_LIGHT_BUDGET / groups) as usize;
+        let limit = (DIRECT_LIGHT_BUDGET / groups).min(MAX_SHADOW_RAYS / MIN_SHADOW_SAMPLES as u64)
+            as usize;
         assert!(!direct.over_budget(limit));
         assert!(direct.over_budget(limit + 1));
     }

@@ -586,8 +586,9 @@ pub fn run_solver(
 pub fn direct_light_warning(stats: &SolveStats, options: &SolverOptions) -> Option<String> {
     (options.direct_light && stats.direct_light_skipped).then(|| {
         format!(
-            "exact direct light skipped: receivers x emitter groups is over {:.0e}; antiradiance carried every bounce (--no-direct-light silences this)",
-            direct::DIRECT_LIGHT_BUDGET as f64
+            "exact direct light skipped: receivers x emitter groups is over {:.0e} or the shadow rays over {:.0e}; antiradiance carried every bounce (--no-direct-light silences this)",
+            direct::DIRECT_LIGHT_BUDGET as f64,
+            direct::MAX_SHADOW_RAYS as f64
         )
     })
 }

@@ -39,7 +39,8 @@ pub struct SolverOptions {
     /// the indirect bounces only (see [`crate::direct`]). On in the `default` and `accurate`
     /// presets (it lowered the error on every scene measured: room 2.53% -> 2.14%, Cornell box
     /// 2.19% -> 1.17%, bear in a room 1.57% -> 0.91%), off in `fast`. Skipped, with a warning,
-    /// when the scene's emitters would cost more than [`crate::direct::DIRECT_LIGHT_BUDGET`].
+    /// when the scene would cost more than [`crate::direct::DIRECT_LIGHT_BUDGET`] or
+    /// [`crate::direct::MAX_SHADOW_RAYS`].
     pub direct_light: bool,
     /// Memory the hierarchical solver may spend caching the geometric factor of every (receiving
     /// element, cluster link) pair, MB. The cache makes each sweep a stream of multiply-adds
