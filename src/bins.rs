@@ -169,9 +169,9 @@ mod tests {
                 let r = (1.0 - z * z).sqrt();
                 counts[bins.bin_of(DVec3::new(r * phi.cos(), r * phi.sin(), z))] += 1;
             }
-            for d in 0..bins.len() {
+            for (d, &count) in counts.iter().enumerate() {
                 let expect = bins.solid_angle[d] / (4.0 * std::f64::consts::PI);
-                let got = counts[d] as f64 / n as f64;
+                let got = count as f64 / n as f64;
                 let sigma = (expect / n as f64).sqrt();
                 assert!(
                     (got - expect).abs() < 5.0 * sigma + 1e-4,

@@ -567,6 +567,11 @@ impl Prepared {
             .collect();
         self.timings.iterate = t0.elapsed().as_secs_f64();
         stats.stage_seconds = Some(self.timings.clone());
+        stats.link_stats = Some(crate::solution::LinkReport {
+            cluster_links: self.links.cluster.len() as u64,
+            exact_links: self.links.exact_sender.len() as u64,
+            refinement: self.links.stats.clone(),
+        });
         let solution = finish(patches, patch_radiance, stats, options.clamp_negative);
         let state = ElementState {
             radiance: radiance_rgb,

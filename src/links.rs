@@ -86,8 +86,8 @@ pub struct Links {
     pub stats: LinkStats,
 }
 
-/// Counts and times of one refinement.
-#[derive(Clone, Debug, Default)]
+/// Counts and times of one refinement (the JSON report's `stats.link_stats.refinement`).
+#[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct LinkStats {
     /// Node pairs culled by the plane test.
     pub culled_pairs: u64,

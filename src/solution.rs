@@ -39,6 +39,21 @@ pub struct SolveStats {
     /// True when exact direct light was asked for but skipped: the scene's emitters would cost
     /// more than [`crate::direct::DIRECT_LIGHT_BUDGET`] unoccluded form factors.
     pub direct_light_skipped: bool,
+    /// The hierarchical solver's links by kind, with the refinement's counts and times; `None`
+    /// for the dense solver and the path tracer.
+    pub link_stats: Option<LinkReport>,
+}
+
+/// The links of a hierarchical solve by kind (`cluster + exact = links`), with what the
+/// refinement counted on the way ([`crate::links::LinkStats`]).
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct LinkReport {
+    /// Cluster links (node to node, one exchange each).
+    pub cluster_links: u64,
+    /// Exact element-to-element couplings.
+    pub exact_links: u64,
+    /// Counts and times of the refinement.
+    pub refinement: crate::links::LinkStats,
 }
 
 /// A solved scene.

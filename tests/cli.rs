@@ -193,6 +193,15 @@ fn check_stats(stats: &Value) {
         );
     }
     assert!(stats["converged"].is_boolean());
+    // Hierarchical solves break their links down by kind.
+    if let Some(detail) = stats["link_stats"].as_object() {
+        let (cluster, exact) = (
+            detail["cluster_links"].as_u64().unwrap(),
+            detail["exact_links"].as_u64().unwrap(),
+        );
+        assert_eq!(cluster + exact, stats["links"].as_u64().unwrap(), "{stats}");
+        assert!(detail["refinement"]["traverse_seconds"].is_f64(), "{stats}");
+    }
 }
 
 /// Checks the tiny scene's per-triangle results: 7 rows, emitters flagged, the degenerate
