@@ -58,11 +58,11 @@ impl Anderson {
     pub fn step(&mut self, x: &mut [f64], g: &[f64]) {
         let n = self.weight.len();
         assert!(x.len() == n && g.len() == n, "vector length");
-        let f: Vec<f64> = g.iter().zip(x.iter()).map(|(g, x)| g - x).collect();
         if self.depth == 0 {
             x.copy_from_slice(g);
             return;
         }
+        let f: Vec<f64> = g.iter().zip(x.iter()).map(|(g, x)| g - x).collect();
         if let Some(f_prev) = self.f_prev.take() {
             let df: Vec<f64> = f.iter().zip(&f_prev).map(|(a, b)| a - b).collect();
             let dg: Vec<f64> = g.iter().zip(&self.g_prev).map(|(a, b)| a - b).collect();

@@ -581,6 +581,20 @@ pub fn run_solver(
     solution
 }
 
+/// The warnings of one antiradiance solve: iteration cap ([`cap_warning`]) and skipped direct
+/// light ([`direct_light_warning`]).
+pub fn solve_warnings(
+    kind: SolverKind,
+    stats: &SolveStats,
+    options: &SolverOptions,
+    patches: &Patches,
+) -> Vec<String> {
+    cap_warning(kind.name(), stats, options, patches)
+        .into_iter()
+        .chain(direct_light_warning(stats, options))
+        .collect()
+}
+
 /// The warning for a solve that was asked for exact direct light but skipped it because the
 /// scene's emitters were over [`direct::DIRECT_LIGHT_BUDGET`] (`None` otherwise).
 pub fn direct_light_warning(stats: &SolveStats, options: &SolverOptions) -> Option<String> {
@@ -791,15 +805,7 @@ pub fn solve(args: &SolveArgs) -> Result<()> {
     let solution = timed(&mut timings.solve, || {
         run_solver(args.solver, &loaded.patches, &options, args.quiet)
     });
-    let cap: Vec<String> = cap_warning(
-        args.solver.name(),
-        &solution.stats,
-        &options,
-        &loaded.patches,
-    )
-    .into_iter()
-    .chain(direct_light_warning(&solution.stats, &options))
-    .collect();
+    let cap = solve_warnings(args.solver, &solution.stats, &options, &loaded.patches);
     for w in &cap {
         eprintln!("warning: {w}");
     }
@@ -954,10 +960,7 @@ pub fn compare(args: &CompareArgs) -> Result<()> {
             run_solver(kind, &loaded.patches, &options, args.quiet)
         });
         timings.solve += seconds;
-        let warnings = cap_warning(kind.name(), &solution.stats, &options, &loaded.patches)
-            .into_iter()
-            .chain(direct_light_warning(&solution.stats, &options));
-        for w in warnings {
+        for w in solve_warnings(kind, &solution.stats, &options, &loaded.patches) {
             eprintln!("warning: {w}");
             cap_warnings.push(w);
         }

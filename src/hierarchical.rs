@@ -298,6 +298,20 @@ impl Prepared {
         }
     }
 
+    /// What a sweep reads that does not change between sweeps.
+    fn sweep_context(&self) -> SweepContext<'_> {
+        SweepContext {
+            tree: &self.tree,
+            bins: &self.bins,
+            live: &self.live,
+            elem_area: &self.elem_area,
+            elem_normal: &self.elem_normal,
+            elem_center: &self.elem_center,
+            use_anti: self.use_anti,
+            two_sided: self.options.two_sided,
+        }
+    }
+
     /// Bytes of the per-sweep state with `channels` colour channels.
     fn state_bytes(&self, channels: u64) -> u64 {
         let n = self.element_count() as u64;
@@ -375,24 +389,13 @@ impl Prepared {
         let (mut x_flat, mut g_flat) = (Vec::new(), Vec::new());
         let tree = &self.tree;
         let links = &self.links;
-        let bins = &self.bins;
-        let (elem_area, elem_normal, elem_center) =
-            (&self.elem_area, &self.elem_normal, &self.elem_center);
+        let elem_area = &self.elem_area;
 
         let groups = &self.groups;
         let mut group_b = vec![[0.0f64; C]; groups.normal.len()];
         let mut group_a = vec![[0.0f64; C]; groups.normal.len() * nb];
         let pairs = self.pairs.as_ref();
-        let ctx = SweepContext {
-            tree,
-            bins,
-            live,
-            elem_area,
-            elem_normal,
-            elem_center,
-            use_anti,
-            two_sided,
-        };
+        let ctx = self.sweep_context();
 
         for iteration in 1..=options.max_iterations {
             // 1. Sender summaries: per normal group of every large node, the area-weighted sums of
@@ -432,11 +435,8 @@ impl Prepared {
                         let mut row = 0.0;
                         for l in links.exact_start[e]..links.exact_start[e + 1] {
                             let s = links.exact_sender[l as usize] as usize;
-                            let entries = &links.exact_entries[links.exact_entry_start[l as usize]
-                                as usize
-                                ..links.exact_entry_start[l as usize + 1] as usize];
                             row += gather_entries(
-                                entries,
+                                links.exact_entries_of(l as usize),
                                 radiance[s],
                                 |bin| {
                                     live.slot(s, bin)
@@ -1044,16 +1044,7 @@ impl PairCache {
             start.push(start.last().expect("pushed") + *c as u64);
         }
         let mut factor = vec![PairFactor::default(); total];
-        let ctx = SweepContext {
-            tree,
-            bins: &prepared.bins,
-            live: &prepared.live,
-            elem_area: &prepared.elem_area,
-            elem_normal: &prepared.elem_normal,
-            elem_center: &prepared.elem_center,
-            use_anti: prepared.use_anti,
-            two_sided: prepared.options.two_sided,
-        };
+        let ctx = prepared.sweep_context();
         split_by_start(&mut factor, &start)
             .into_par_iter()
             .enumerate()
@@ -1111,7 +1102,7 @@ impl LiveBins {
         let (tree, links) = (&prepared.tree, &prepared.links);
         let n = prepared.element_count();
         let words = prepared.bins.len().div_ceil(64);
-        let two_sided = prepared.options.two_sided;
+        let ctx = prepared.sweep_context();
         let set = |m: &mut [u64], bin: usize| m[bin >> 6] |= 1u64 << (bin & 63);
 
         // Read: bins of the cluster links each node sends (inherited by its elements) and of the
@@ -1125,9 +1116,7 @@ impl LiveBins {
         for e in 0..n {
             for l in links.exact_start[e]..links.exact_start[e + 1] {
                 let s = links.exact_sender[l as usize] as usize;
-                let entries = &links.exact_entries[links.exact_entry_start[l as usize] as usize
-                    ..links.exact_entry_start[l as usize + 1] as usize];
-                for entry in entries {
+                for entry in links.exact_entries_of(l as usize) {
                     if entry.f_a != 0.0 || entry.o_a != 0.0 {
                         set(&mut read[s * words..(s + 1) * words], entry.bin as usize);
                     }
@@ -1143,32 +1132,25 @@ impl LiveBins {
             .enumerate()
             .for_each(|(e, (m, r))| {
                 for l in links.exact_start[e]..links.exact_start[e + 1] {
-                    let entries = &links.exact_entries[links.exact_entry_start[l as usize] as usize
-                        ..links.exact_entry_start[l as usize + 1] as usize];
-                    for entry in entries {
+                    for entry in links.exact_entries_of(l as usize) {
                         if entry.o_b != 0.0 || entry.o_a != 0.0 {
                             set(m, entry.bin as usize);
                         }
                     }
                 }
-                let (n_e, x_e) = (prepared.elem_normal[e], prepared.elem_center[e]);
+                // The sweep's own per-pair factors: a bin is written where the pair's
+                // antiradiance factor is not 0.
+                ctx.for_each_pair(e, links, |_, l, f| {
+                    if f.anti != 0.0 {
+                        set(m, l.bin as usize);
+                    }
+                });
                 let mut reads = r.to_vec();
                 let mut node = tree.elements[e];
                 while node != NONE {
                     let i = node as usize;
                     for (k, word) in reads.iter_mut().enumerate() {
                         *word |= node_sends[i * words + k];
-                    }
-                    let range =
-                        links.cluster_start[i] as usize..links.cluster_start[i + 1] as usize;
-                    for l in &links.cluster[range] {
-                        let origin =
-                            DVec3::new(l.origin[0] as f64, l.origin[1] as f64, l.origin[2] as f64);
-                        let v = x_e - origin;
-                        let d2 = v.length_squared();
-                        if d2 > 0.0 && (two_sided || -n_e.dot(v) > 0.0) {
-                            set(m, l.bin as usize);
-                        }
                     }
                     node = tree.nodes[i].parent;
                 }

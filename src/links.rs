@@ -119,6 +119,15 @@ pub struct LinkStats {
 }
 
 impl Links {
+    /// The coupling entries of exact link `l`.
+    ///
+    /// # Panics
+    /// When `l` is not an exact link's index.
+    pub fn exact_entries_of(&self, l: usize) -> &[Entry] {
+        &self.exact_entries
+            [self.exact_entry_start[l] as usize..self.exact_entry_start[l + 1] as usize]
+    }
+
     /// Total number of links (cluster + exact).
     pub fn len(&self) -> usize {
         self.cluster.len() + self.exact_sender.len()

@@ -299,6 +299,22 @@ impl Relighter {
         Ok(changed)
     }
 
+    /// The largest emission channel of any triangle, scene units.
+    fn brightest(&self) -> f64 {
+        self.emission
+            .iter()
+            .flat_map(|e| e.iter().copied())
+            .fold(0.0f64, f64::max)
+    }
+
+    /// Sets the patches' emission to the current emission over the current normalization scale.
+    fn sync_patch_emission(&mut self) {
+        let scale = self.patches.emission_scale;
+        for (p, &t) in self.patches.parent.iter().enumerate() {
+            self.patches.emission[p] = self.emission[t as usize].map(|x| x / scale);
+        }
+    }
+
     /// Forgets the last solution: the next solve starts from the emission, as a from-scratch
     /// solve would (same links, so the same answer up to the tolerance).
     pub fn forget_warm_start(&mut self) {
@@ -309,11 +325,7 @@ impl Relighter {
     /// Never fails: the emission was checked when it was set; no NaN reaches the solution.
     pub fn solve(&mut self, progress: &Progress) -> Relit {
         let start = Instant::now();
-        let brightest = self
-            .emission
-            .iter()
-            .flat_map(|e| e.iter().copied())
-            .fold(0.0f64, f64::max);
+        let brightest = self.brightest();
         let scale = self.patches.emission_scale;
         // Without a warm state the normalization is free: use the brightest emission, exactly
         // as a from-scratch solve does. With one, keep its scale unless the lights drifted by
@@ -326,10 +338,7 @@ impl Relighter {
             self.patches.emission_scale = brightest;
             self.warm = None;
         }
-        let scale = self.patches.emission_scale;
-        for (p, &t) in self.patches.parent.iter().enumerate() {
-            self.patches.emission[p] = self.emission[t as usize].map(|x| x / scale);
-        }
+        self.sync_patch_emission();
         let warm = self.warm.take();
         let warm_started = warm.is_some();
         let (solution, state) = self.prepared.solve_with_emission(
@@ -475,18 +484,12 @@ impl Relighter {
         }
         self.emission = emission;
         self.warm = None;
-        let brightest = self
-            .emission
-            .iter()
-            .flat_map(|e| e.iter().copied())
-            .fold(0.0f64, f64::max);
+        let brightest = self.brightest();
         if brightest > 0.0 {
             self.patches.emission_scale = brightest;
         }
+        self.sync_patch_emission();
         let scale = self.patches.emission_scale;
-        for (p, &t) in self.patches.parent.iter().enumerate() {
-            self.patches.emission[p] = self.emission[t as usize].map(|x| x / scale);
-        }
         let normalized: Vec<[f64; 3]> = radiance.iter().map(|b| b.map(|x| x / scale)).collect();
         let stats = crate::solution::SolveStats {
             converged: true,
