@@ -219,56 +219,97 @@ fn culled(tree: &ClusterTree, s: u32, r: u32, two_sided: bool) -> bool {
     false
 }
 
-/// Refines links over the whole tree, splitting leaf triangles where needed, then finalizes the
-/// tree (element numbering) and computes exact couplings in parallel.
-pub fn refine(
-    tree: &mut ClusterTree,
-    bins: &Bins,
-    params: &LinkParams,
-    coupling: &CouplingParams,
-    record_culled: bool,
-) -> Links {
-    let t_start = std::time::Instant::now();
-    let mut stats = LinkStats::default();
-    let limit = params.epsilon * bins.mean_solid_angle();
-    let mut cluster: Vec<ClusterLink> = Vec::new();
-    let mut exact_pairs: Vec<(u32, u32)> = Vec::new();
-    let mut culled_pairs = Vec::new();
-    let mut stack: Vec<(u32, u32)> = vec![(0, 0)];
+/// What the traversal found below some node pairs (one task's share, merged in pair order).
+#[derive(Default)]
+struct Found {
+    cluster: Vec<ClusterLink>,
+    /// (sender, receiver) node pairs to couple element by element.
+    exact: Vec<(u32, u32)>,
+    /// Pairs that exchange nothing (kept only when `record_culled`).
+    culled: Vec<(u32, u32)>,
+    /// Pairs waiting for a leaf to be split: (sender, receiver, split the sender?).
+    deferred: Vec<(u32, u32, bool)>,
+    stats: LinkStats,
+}
 
-    while let Some((s, r)) = stack.pop() {
+impl Found {
+    /// The pieces' findings in order, each array concatenated once (into exact capacity).
+    fn concat(pieces: Vec<Found>) -> Found {
+        fn gather<T: Copy>(pieces: &[Found], field: impl Fn(&Found) -> &Vec<T>) -> Vec<T> {
+            let mut all = Vec::with_capacity(pieces.iter().map(|p| field(p).len()).sum());
+            for p in pieces {
+                all.extend_from_slice(field(p));
+            }
+            all
+        }
+        let mut stats = LinkStats::default();
+        for p in &pieces {
+            let (a, b) = (&mut stats, &p.stats);
+            a.culled_pairs += b.culled_pairs;
+            a.silent_links += b.silent_links;
+            a.exact_apart += b.exact_apart;
+            a.exact_touching += b.exact_touching;
+            a.leaf_splits += b.leaf_splits;
+        }
+        Found {
+            cluster: gather(&pieces, |p| &p.cluster),
+            exact: gather(&pieces, |p| &p.exact),
+            culled: gather(&pieces, |p| &p.culled),
+            deferred: gather(&pieces, |p| &p.deferred),
+            stats,
+        }
+    }
+}
+
+/// The fixed inputs of one traversal.
+struct Traversal<'a> {
+    tree: &'a ClusterTree,
+    bins: &'a Bins,
+    params: &'a LinkParams,
+    coupling: &'a CouplingParams,
+    record_culled: bool,
+    /// Largest sender solid angle of a cluster link (steradians).
+    limit: f64,
+}
+
+impl Traversal<'_> {
+    /// Decides one node pair: records it in `found` (a link, exact pair, culled pair, or a pair
+    /// waiting for a leaf split), or hands the pairs it splits into to `push`. Reads the tree
+    /// only: a leaf that must be split is deferred to the caller, which splits it between rounds.
+    fn visit(&self, (s, r): (u32, u32), found: &mut Found, mut push: impl FnMut((u32, u32))) {
+        let (tree, params, coupling) = (self.tree, self.params, self.coupling);
         // Self pair: a leaf does not exchange with itself; a cluster's children exchange pairwise.
         if s == r {
             let node = &tree.nodes[s as usize];
             if node.is_leaf() {
                 // Recorded so that validation knows the pieces of this triangle, should it be split
                 // later, exchange nothing among themselves (they are coplanar).
-                if record_culled {
-                    culled_pairs.push((s, s));
+                if self.record_culled {
+                    found.culled.push((s, s));
                 }
-                continue;
+                return;
             }
             let (first, count) = (node.first_child, node.child_count as u32);
             for a in first..first + count {
                 for b in first..first + count {
-                    stack.push((a, b));
+                    push((a, b));
                 }
             }
-            continue;
+            return;
         }
         if culled(tree, s, r, coupling.two_sided) {
-            stats.culled_pairs += 1;
-            if record_culled {
-                culled_pairs.push((s, r));
+            found.stats.culled_pairs += 1;
+            if self.record_culled {
+                found.culled.push((s, r));
             }
-            continue;
+            return;
         }
         let (sn, rn) = (&tree.nodes[s as usize], &tree.nodes[r as usize]);
         let d = (rn.center - sn.center).length();
         let gap = d - sn.radius - rn.radius;
         if params.epsilon > 0.0 && gap > 0.0 {
             let small = |omega_s: f64, omega_r: f64| {
-                omega_s <= limit && omega_r <= params.receiver_factor * limit
+                omega_s <= self.limit && omega_r <= params.receiver_factor * self.limit
             };
             // Two triangles at least leaf_gap / epsilon receiver diameters apart: the receiver's
             // one point integrates the exchange well (finer epsilon asks more), and the
@@ -295,28 +336,27 @@ pub fn refine(
                         16,
                     )
                 {
-                    stats.silent_links += 1;
-                    if record_culled {
-                        culled_pairs.push((s, r));
+                    found.stats.silent_links += 1;
+                    if self.record_culled {
+                        found.culled.push((s, r));
                     }
-                    continue;
+                    return;
                 }
                 let w = (rn.centroid - sn.centroid).normalize_or_zero();
-                cluster.push(ClusterLink {
+                found.cluster.push(ClusterLink {
                     sender: s,
                     receiver: r,
                     w: [w.x as f32, w.y as f32, w.z as f32],
                     origin: sn.centroid.as_vec3().to_array(),
                     spread: (sn.area / std::f64::consts::PI).min(sn.radius * sn.radius) as f32,
-                    bin: bins.bin_of(w) as u16,
+                    bin: self.bins.bin_of(w) as u16,
                 });
-                continue;
+                return;
             }
         }
-        // Too coarse: split the larger node. Leaves split (into sub-triangles) only while they are
-        // large against the gap to the other node and above the resolution floor.
-        // A leaf triangle is split only when it is much larger than its partner and than the gap
-        // between them (a coarse floor under a small object), never among similar neighbours.
+        // Too coarse: split the larger node. A leaf triangle is split (into sub-triangles) only
+        // when it is much larger than its partner and than the gap between them (a coarse floor
+        // under a small object), above the resolution floor, never among similar neighbours.
         let leaf_splittable = |n: &crate::hierarchy::Node, other: &crate::hierarchy::Node| {
             params.epsilon > 0.0
                 && n.split_depth < params.max_split_depth
@@ -329,35 +369,129 @@ pub fn refine(
         let split_s = match (s_can, r_can) {
             (false, false) => {
                 if gap > 0.0 {
-                    stats.exact_apart += 1;
+                    found.stats.exact_apart += 1;
                 } else {
-                    stats.exact_touching += 1;
+                    found.stats.exact_touching += 1;
                 }
-                exact_pairs.push((s, r));
-                continue;
+                found.exact.push((s, r));
+                return;
             }
             (true, false) => true,
             (false, true) => false,
             (true, true) => sn.radius >= rn.radius,
         };
-        let node = if split_s { s } else { r };
-        if tree.nodes[node as usize].is_leaf() {
-            stats.leaf_splits += 1;
-            tree.split_leaf(node);
+        let n = &tree.nodes[if split_s { s } else { r } as usize];
+        if n.is_leaf() {
+            found.deferred.push((s, r, split_s));
+            return;
         }
-        let n = &tree.nodes[node as usize];
         for c in n.first_child..n.first_child + n.child_count as u32 {
-            stack.push(if split_s { (c, r) } else { (s, c) });
+            push(if split_s { (c, r) } else { (s, c) });
         }
     }
 
+    /// Everything below `pairs`, in parallel, appended to `pieces`: each task walks its pairs
+    /// depth first; the pieces are in the order of `pairs` (so what they hold, once
+    /// concatenated, does not depend on scheduling).
+    fn run(&self, pairs: &[(u32, u32)], pieces: &mut Vec<Found>) {
+        let found: Vec<Found> = pairs
+            .par_iter()
+            .fold(
+                || (Found::default(), Vec::new()),
+                |(mut found, mut stack), &pair| {
+                    stack.push(pair);
+                    while let Some(p) = stack.pop() {
+                        self.visit(p, &mut found, |q| stack.push(q));
+                    }
+                    (found, stack)
+                },
+            )
+            .map(|(found, _)| found)
+            .collect();
+        pieces.extend(found);
+    }
+}
+
+/// Node pairs handed to the parallel traversal at a time, at least (the tree's top is expanded
+/// breadth first until there are this many).
+const PARALLEL_PAIRS: usize = 16384;
+
+/// Refines links over the whole tree, splitting leaf triangles where needed, then finalizes the
+/// tree (element numbering) and computes exact couplings in parallel.
+///
+/// The traversal runs in rounds: each walks its node pairs in parallel over a read-only tree,
+/// deferring the pairs that need a leaf triangle split; between rounds those leaves are split
+/// (in a fixed order) and the deferred pairs continue below them. At most `max_split_depth + 1`
+/// rounds.
+pub fn refine(
+    tree: &mut ClusterTree,
+    bins: &Bins,
+    params: &LinkParams,
+    coupling: &CouplingParams,
+    record_culled: bool,
+) -> Links {
+    let t_start = std::time::Instant::now();
+    let mut pieces: Vec<Found> = Vec::new();
+    let mut leaf_splits = 0;
+    let mut pairs: Vec<(u32, u32)> = vec![(0, 0)];
+    while !pairs.is_empty() {
+        let traversal = Traversal {
+            tree,
+            bins,
+            params,
+            coupling,
+            record_culled,
+            limit: params.epsilon * bins.mean_solid_angle(),
+        };
+        // 1. Expand the top breadth first until there is work for every thread.
+        let mut queue: std::collections::VecDeque<(u32, u32)> = pairs.drain(..).collect();
+        let mut top = Found::default();
+        while !queue.is_empty() && queue.len() < PARALLEL_PAIRS {
+            let pair = queue.pop_front().expect("not empty");
+            traversal.visit(pair, &mut top, |q| queue.push_back(q));
+        }
+        let first_piece = pieces.len();
+        pieces.push(top);
+        // 2. Everything below, in parallel.
+        traversal.run(queue.make_contiguous(), &mut pieces);
+        // 3. Split the leaves this round's deferred pairs wait for (in node order), and continue
+        //    below them next round.
+        let deferred: Vec<(u32, u32, bool)> = pieces[first_piece..]
+            .iter_mut()
+            .flat_map(|p| std::mem::take(&mut p.deferred))
+            .collect();
+        let mut to_split: Vec<u32> = deferred
+            .iter()
+            .map(|&(s, r, split_s)| if split_s { s } else { r })
+            .collect();
+        to_split.sort_unstable();
+        to_split.dedup();
+        for &node in &to_split {
+            tree.split_leaf(node);
+        }
+        leaf_splits += to_split.len() as u64;
+        for (s, r, split_s) in deferred {
+            let n = &tree.nodes[if split_s { s } else { r } as usize];
+            for c in n.first_child..n.first_child + n.child_count as u32 {
+                pairs.push(if split_s { (c, r) } else { (s, c) });
+            }
+        }
+    }
+    let Found {
+        mut cluster,
+        exact: exact_pairs,
+        culled: culled_pairs,
+        mut stats,
+        ..
+    } = Found::concat(pieces);
+    stats.leaf_splits = leaf_splits;
     tree.finalize();
     stats.exact_pairs = exact_pairs.len() as u64;
     let t_traversed = std::time::Instant::now();
     stats.traverse_seconds = (t_traversed - t_start).as_secs_f64();
 
     // Cluster links grouped by receiver node.
-    cluster.sort_unstable_by_key(|l| l.receiver);
+    cluster.par_sort_unstable_by_key(|l| (l.receiver, l.sender));
     let mut cluster_start = vec![0u32; tree.nodes.len() + 1];
     for l in &cluster {
         cluster_start[l.receiver as usize + 1] += 1;
