@@ -476,6 +476,30 @@ pub fn refine(
                 pairs.push(if split_s { (c, r) } else { (s, c) });
             }
         }
+        // 4. Exact pairs recorded against a leaf that is now split are decided again next round,
+        //    below its pieces (where a serial walk that met the split first would have gone).
+        if !to_split.is_empty() {
+            let mut is_split = vec![false; tree.nodes.len()];
+            for &node in &to_split {
+                is_split[node as usize] = true;
+            }
+            for piece in &mut pieces {
+                let Found { exact, stats, .. } = piece;
+                exact.retain(|&(s, r)| {
+                    if !(is_split[s as usize] || is_split[r as usize]) {
+                        return true;
+                    }
+                    let (sn, rn) = (&tree.nodes[s as usize], &tree.nodes[r as usize]);
+                    if (rn.center - sn.center).length() - sn.radius - rn.radius > 0.0 {
+                        stats.exact_apart -= 1;
+                    } else {
+                        stats.exact_touching -= 1;
+                    }
+                    pairs.push((s, r));
+                    false
+                });
+            }
+        }
     }
     let Found {
         mut cluster,
