@@ -2,13 +2,16 @@
 //! solve. Scenes: the seed room and bear from ../shared/meshes when present (skipped cleanly when
 //! absent), and a generated Cornell box of room scale (about 10k triangles) always.
 //!
-//! Run: `cargo bench --bench solvers` (add `-- hierarchical` to filter).
+//! Run: `cargo bench --bench solvers` (add `-- hierarchical` to filter). The end-to-end benches
+//! run without (`build+links+solve`) and with (`with_direct_light`, the CLI's default) exact
+//! direct light.
 
 use std::path::Path;
 use std::time::Duration;
 
 use antiradiance::bins::Bins;
 use antiradiance::dense::solve_dense;
+use antiradiance::direct::solve_hierarchical_direct;
 use antiradiance::hierarchical::{link_params, Prepared};
 use antiradiance::hierarchy::ClusterTree;
 use antiradiance::links;
@@ -99,6 +102,11 @@ fn stages(c: &mut Criterion) {
                     Prepared::new(&patches, &options, false).solve(&patches, &Progress::hidden())
                 })
             },
+        );
+        // What the CLI's default runs (load and output aside): the above plus exact direct light.
+        group.bench_function(
+            BenchmarkId::new("hierarchical_end_to_end", "with_direct_light"),
+            |b| b.iter(|| solve_hierarchical_direct(&patches, &options, &Progress::hidden())),
         );
         // The dense solver's full solve takes minutes at this size: one sweep (near-pair cache
         // plus one streamed pass over all pairs) is measured; multiply by the iteration count.

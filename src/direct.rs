@@ -51,9 +51,12 @@ use crate::solution::Solution;
 use crate::solve::{finish, SolverOptions};
 use crate::transport::{separation, PatchGeom, FAR_RATIO};
 
-/// Total shadow rays one direct-light pass aims at, spread evenly over the receivers (then
-/// clamped to [`MIN_SHADOW_SAMPLES`]..=[`MAX_SHADOW_SAMPLES`] per receiver).
-pub const SHADOW_RAY_BUDGET: usize = 2_000_000;
+/// Total shadow rays one direct-light pass aims at, spread over the receivers as
+/// (area x reflected unoccluded light)^(2/3) (see [`DirectLight::reflected`]), then clamped to
+/// [`MIN_SHADOW_SAMPLES`]..=[`MAX_SHADOW_SAMPLES`] per receiver. Spread evenly, 2M rays left
+/// the room's direct light 0.33% and the bear's 1.63% from a 32M-ray run (design-note error);
+/// spread by light, 1M rays leave 0.30% and 0.72% (0.5M: 0.51% and 1.05%).
+pub const SHADOW_RAY_BUDGET: usize = 1_000_000;
 
 /// Most unoccluded form-factor terms (receivers x emitter groups) a direct-light pass may cost;
 /// above it the solvers skip exact direct light (and say so): a scene whose every triangle is
@@ -62,18 +65,20 @@ pub const DIRECT_LIGHT_BUDGET: u64 = 200_000_000;
 
 /// Most shadow rays a direct-light pass may need at [`MIN_SHADOW_SAMPLES`] per receiver; above
 /// it (more than half a million receivers) the solvers skip exact direct light (and say so): on
-/// a 1M-triangle box the pass alone took longer than the whole antiradiance solve.
-pub const MAX_SHADOW_RAYS: u64 = 32_000_000;
+/// a 1M-triangle box the pass (at 64 rays per receiver) took longer than the whole
+/// antiradiance solve.
+pub const MAX_SHADOW_RAYS: u64 = 8_000_000;
 
 /// Fewest shadow samples per receiving element (a square, for stratification).
-pub const MIN_SHADOW_SAMPLES: usize = 64;
+pub const MIN_SHADOW_SAMPLES: usize = 16;
 
 /// Most shadow samples per receiving element (a square, for stratification).
 pub const MAX_SHADOW_SAMPLES: usize = 1024;
 
 /// Fewest shadow rays of the pilot pass (a square; the pilot takes a quarter of the receiver's
 /// rays): a receiver whose pilot rays all agree (all visible or all blocked) gets no more, and
-/// is taken as wholly lit or wholly in shadow. On the room 55% of the receivers stop there and
+/// is taken as wholly lit or wholly in shadow. Measured with 2M rays spread evenly (196 per
+/// receiver): on the room 55% of the receivers stopped there and
 /// the direct light takes about 30% less time; the result moves by 0.27% (design-note error
 /// against the run without pilot) and its error against the path tracer does not move (2.13%
 /// with it, 2.16% without; bear in a room, bear and legoBrick within 0.12%). A pilot of 16
@@ -429,8 +434,8 @@ fn receiver_points(ratio: f64) -> usize {
     }
 }
 
-/// Shadow samples per receiver for `receivers` receivers: the ray budget spread evenly, clamped,
-/// rounded down to a square k x k.
+/// Mean shadow samples per receiver for `receivers` receivers: the ray budget spread evenly,
+/// clamped, rounded down to a square k x k.
 pub fn shadow_samples(receivers: usize) -> usize {
     let wanted =
         (SHADOW_RAY_BUDGET / receivers.max(1)).clamp(MIN_SHADOW_SAMPLES, MAX_SHADOW_SAMPLES);
@@ -444,7 +449,8 @@ pub struct DirectLight<'a> {
     emitters: Emitters,
     groups: Vec<EmitterGroup>,
     rays: RayScene<'a>,
-    /// Shadow samples per receiving element (k x k).
+    /// Mean shadow samples per receiving element (the budget; each receiver's own count follows
+    /// its light, see [`Self::reflected`]).
     samples: usize,
 }
 
@@ -463,7 +469,7 @@ impl<'a> DirectLight<'a> {
         }
     }
 
-    /// Shadow samples per receiving element.
+    /// Mean shadow samples per receiving element.
     pub fn samples(&self) -> usize {
         self.samples
     }
@@ -476,37 +482,74 @@ impl<'a> DirectLight<'a> {
     /// progress message.
     pub fn reflected(&self, receivers: &[Element], progress: &Progress) -> Vec<[f64; 3]> {
         progress.message(format!(
-            "direct light: {} receivers x {} emitters, {} shadow rays each",
+            "direct light: {} receivers x {} emitters, {} shadow rays each on average",
             receivers.len(),
             self.emitters.len(),
             self.samples
         ));
+        // 1. Every receiver's unoccluded light, and the groups it comes from.
+        let unoccluded: Vec<(Vec<GroupLight>, [f64; 3])> = receivers
+            .par_iter()
+            .map_init(Vec::new, |whole, r| {
+                let rho = self.patches.albedo[r.patch as usize];
+                if self.emitters.len() == 0 || !(r.area > 0.0) || rho.iter().all(|&x| x <= 0.0) {
+                    return (Vec::new(), [0.0; 3]);
+                }
+                let mut lights = Vec::new();
+                let u = self.unoccluded(r, &mut lights, whole);
+                (lights, u)
+            })
+            .collect();
+        // 2. Shadow rays where the light is: receiver i's share of the budget goes as
+        //    (area x reflected unoccluded light)^(2/3), the split of a fixed number of rays that
+        //    minimises the area-weighted error sum A_i D_i / sqrt(n_i) (equal noise per ray
+        //    assumed), clamped to MIN..=MAX_SHADOW_SAMPLES.
+        let weight: Vec<f64> = receivers
+            .iter()
+            .zip(&unoccluded)
+            .map(|(r, (_, u))| {
+                let rho = self.patches.albedo[r.patch as usize];
+                let d = (0..3).map(|c| rho[c] * u[c]).fold(0.0, f64::max);
+                let w = (r.area * d).powf(2.0 / 3.0);
+                if w.is_finite() {
+                    w
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let total_weight: f64 = weight.iter().sum();
+        let budget = (self.samples * receivers.len()) as f64;
+        let samples_of = |w: f64| {
+            let share = if total_weight > 0.0 {
+                budget * w / total_weight
+            } else {
+                0.0
+            };
+            let n = (share as usize).clamp(MIN_SHADOW_SAMPLES, MAX_SHADOW_SAMPLES);
+            n.isqrt().pow(2)
+        };
+        // 3. The visible part of it.
         receivers
             .par_iter()
+            .zip(&unoccluded)
+            .zip(&weight)
             .enumerate()
-            .map_init(
-                || (Vec::new(), Vec::new()),
-                |(lights, whole), (index, r)| {
-                    let rho = self.patches.albedo[r.patch as usize];
-                    if self.emitters.len() == 0 || !(r.area > 0.0) || rho.iter().all(|&x| x <= 0.0)
-                    {
-                        return [0.0; 3];
+            .map(|(index, ((r, (lights, u)), &w))| {
+                if u.iter().all(|&x| x <= 0.0) {
+                    return [0.0; 3];
+                }
+                let rho = self.patches.albedo[r.patch as usize];
+                let visible = self.visible_light(r, index as u64, lights, samples_of(w));
+                [0, 1, 2].map(|c| {
+                    let d = rho[c] * visible[c];
+                    if d.is_finite() {
+                        d.max(0.0)
+                    } else {
+                        0.0
                     }
-                    let unoccluded = self.unoccluded(r, lights, whole);
-                    if unoccluded.iter().all(|&x| x <= 0.0) {
-                        return [0.0; 3];
-                    }
-                    let visible = self.visible_light(r, index as u64, lights);
-                    [0, 1, 2].map(|c| {
-                        let d = rho[c] * visible[c];
-                        if d.is_finite() {
-                            d.max(0.0)
-                        } else {
-                            0.0
-                        }
-                    })
-                },
-            )
+                })
+            })
             .collect()
     }
 
@@ -772,7 +815,13 @@ impl<'a> DirectLight<'a> {
     /// a stratified choice of group and member (1-D strata over the distribution) and a
     /// stratified point on the member (k x k grid), both strata drawn through random
     /// permutations so the pairing stays unbiased.
-    fn visible_light(&self, r: &Element, index: u64, lights: &[GroupLight]) -> [f64; 3] {
+    fn visible_light(
+        &self,
+        r: &Element,
+        index: u64,
+        lights: &[GroupLight],
+        samples: usize,
+    ) -> [f64; 3] {
         let emission = |l: &GroupLight| self.groups[l.group as usize].emission;
         let unoccluded = |l: &GroupLight| emission(l).map(|e| e * l.form_factor);
         // The distribution over the groups that light this receiver.
@@ -800,7 +849,7 @@ impl<'a> DirectLight<'a> {
         // A pilot of a quarter of the rays first; when they all agree (every ray that carries
         // light reaches it, or none does), the receiver is taken as wholly lit or wholly in
         // shadow.
-        let pilot_n = (self.samples / 4).isqrt().pow(2).max(PILOT_SAMPLES);
+        let pilot_n = (samples / 4).isqrt().pow(2).max(PILOT_SAMPLES);
         let pilot = self.shadow_pass(r, index, lights, &cdf, pilot_n, PILOT_SEED);
         let carried: usize = pilot.counts.iter().sum();
         let Pass {
@@ -811,7 +860,7 @@ impl<'a> DirectLight<'a> {
         } = if carried > 0 && (pilot.seen == 0 || pilot.seen == carried) {
             pilot
         } else {
-            self.shadow_pass(r, index, lights, &cdf, self.samples, SEED)
+            self.shadow_pass(r, index, lights, &cdf, samples, SEED)
         };
         // Groups with few samples share the fraction of all such groups' samples (a ratio of a
         // handful of samples is noisy); failing that, of all samples; failing that, 1.
