@@ -51,6 +51,34 @@ fn every_element_pair_is_covered_exactly_once() {
     }
 }
 
+/// The link traversal runs in parallel: its links must not depend on how many threads walk it
+/// or how the work is stolen (one thread against three, on a scene whose coarse walls are split
+/// on demand, so the rounds of leaf splits are exercised too).
+#[test]
+fn refinement_does_not_depend_on_the_thread_count() {
+    let patches = build_patches(&scenes::cornell_box(), None);
+    let options = SolverOptions::default();
+    let refine_with = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| Prepared::new(&patches, &options, false))
+    };
+    let (one, three) = (refine_with(1), refine_with(3));
+    assert!(
+        one.links.stats.leaf_splits > 0,
+        "the scene should split leaves"
+    );
+    assert_eq!(one.tree.nodes.len(), three.tree.nodes.len());
+    assert_eq!(one.links.cluster.len(), three.links.cluster.len());
+    for (a, b) in one.links.cluster.iter().zip(&three.links.cluster) {
+        assert_eq!((a.sender, a.receiver, a.bin), (b.sender, b.receiver, b.bin));
+    }
+    assert_eq!(one.links.exact_start, three.links.exact_start);
+    assert_eq!(one.links.exact_sender, three.links.exact_sender);
+}
+
 #[test]
 fn refined_to_element_pairs_equals_dense() {
     for (name, scene, max_edge) in [
