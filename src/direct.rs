@@ -849,18 +849,24 @@ impl<'a> DirectLight<'a> {
         // A pilot of a quarter of the rays first; when they all agree (every ray that carries
         // light reaches it, or none does), the receiver is taken as wholly lit or wholly in
         // shadow.
+        // (A receiver with too few rays for a smaller pilot gets them all at once.)
         let pilot_n = (samples / 4).isqrt().pow(2).max(PILOT_SAMPLES);
-        let pilot = self.shadow_pass(r, index, lights, &cdf, pilot_n, PILOT_SEED);
-        let carried: usize = pilot.counts.iter().sum();
+        let full = || self.shadow_pass(r, index, lights, &cdf, samples, SEED);
         let Pass {
             arriving,
             visible,
             counts,
             ..
-        } = if carried > 0 && (pilot.seen == 0 || pilot.seen == carried) {
-            pilot
+        } = if pilot_n >= samples {
+            full()
         } else {
-            self.shadow_pass(r, index, lights, &cdf, samples, SEED)
+            let pilot = self.shadow_pass(r, index, lights, &cdf, pilot_n, PILOT_SEED);
+            let carried: usize = pilot.counts.iter().sum();
+            if carried > 0 && (pilot.seen == 0 || pilot.seen == carried) {
+                pilot
+            } else {
+                full()
+            }
         };
         // Groups with few samples share the fraction of all such groups' samples (a ratio of a
         // handful of samples is noisy); failing that, of all samples; failing that, 1.
