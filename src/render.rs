@@ -17,10 +17,13 @@
 //! 2. Enclosure test: a coarse probe image (96 pixels wide) is rasterized from there. If back
 //!    faces cover more than half of the covered pixels, the camera would only see the outside of
 //!    a closed room, so the eye moves inside: at the centre height, pulled back along the longer
-//!    horizontal axis (x or z) towards its + side wall by 90%, 60%, 30% or 0% of the half extent,
-//!    looking along the axis towards the - side. The first of these (then the same along the
-//!    other horizontal axis) whose probe is front-dominated wins; if none is, the candidate with
-//!    the smallest back-face fraction is used (the outside view included).
+//!    horizontal axis (x or z), then the other, towards its + side wall and then its - side wall
+//!    by 160% (just beyond the wall), 90%, 60%, 30% or 0% of the half extent, looking along the
+//!    axis the other way. Of the candidates whose probe is front-dominated, the one showing the
+//!    most distinct patches wins, then the most front-side pixels (the first on ties), so a room
+//!    open on one side is seen through its opening from just outside; if none is
+//!    front-dominated, the candidate with the smallest back-face fraction is used (the outside
+//!    view included).
 //!
 //! With only `target` given the eye is placed on the diagonal at the fitting distance from the
 //! target; with only `eye` given the camera looks at the bounds' centre. The image's up is world
@@ -509,8 +512,17 @@ fn rasterize(patches: &Patches, solution: &Solution, welded: Option<&Welded>, vi
     frame
 }
 
-/// Fraction of the covered probe pixels that show a back side (0 when nothing is covered).
-fn back_fraction(patches: &Patches, eye: DVec3, target: DVec3, camera: &CameraOptions) -> f64 {
+/// What a coarse probe image of the view from `eye` towards `target` shows.
+struct Probe {
+    /// Fraction of the covered pixels that show back sides (0 when nothing is covered).
+    back_fraction: f64,
+    /// Distinct patches seen from the front.
+    front_patches: usize,
+    /// Fraction of all pixels that show front sides.
+    front_coverage: f64,
+}
+
+fn probe(patches: &Patches, eye: DVec3, target: DVec3, camera: &CameraOptions) -> Probe {
     let aspect = camera.width.max(1) as f64 / camera.height.max(1) as f64;
     let w = PROBE_WIDTH;
     let h = ((w as f64 / aspect).round() as u32).clamp(8, 4 * PROBE_WIDTH);
@@ -523,10 +535,20 @@ fn back_fraction(patches: &Patches, eye: DVec3, target: DVec3, camera: &CameraOp
     };
     let frame = rasterize(patches, &Solution::default(), None, view);
     let (front, back) = frame.side_counts();
-    if front + back == 0 {
-        0.0
-    } else {
-        back as f64 / (front + back) as f64
+    let mut seen: Vec<u32> = (0..frame.patch.len())
+        .filter(|&i| frame.patch[i] != NO_PATCH && frame.front[i])
+        .map(|i| frame.patch[i])
+        .collect();
+    seen.sort_unstable();
+    seen.dedup();
+    Probe {
+        back_fraction: if front + back == 0 {
+            0.0
+        } else {
+            back as f64 / (front + back) as f64
+        },
+        front_patches: seen.len(),
+        front_coverage: front as f64 / (w * h) as f64,
     }
 }
 
@@ -564,7 +586,7 @@ pub fn resolve_view(patches: &Patches, camera: &CameraOptions) -> (DVec3, DVec3)
         }
         (None, None) => {
             let outside = (center + diagonal * fit, center);
-            let outside_back = back_fraction(patches, outside.0, outside.1, camera);
+            let outside_back = probe(patches, outside.0, outside.1, camera).back_fraction;
             if outside_back <= 0.5 {
                 return outside;
             }
@@ -575,21 +597,29 @@ pub fn resolve_view(patches: &Patches, camera: &CameraOptions) -> (DVec3, DVec3)
             } else {
                 [(DVec3::X, extent.x), (DVec3::Z, extent.z)]
             };
+            // Of the front-dominated views, the one that shows the most patches, then the most
+            // front-side pixels (so a room open on one side, like the Cornell box, is seen
+            // through its opening from just outside it, not towards it from inside).
+            let mut best_front: Option<((usize, f64), (DVec3, DVec3))> = None;
             let mut best = (outside_back, outside);
             for (axis, len) in axes {
-                for pull in [0.9, 0.6, 0.3, 0.0] {
-                    let eye = center + axis * (0.5 * len * pull);
-                    let target = eye - axis * radius;
-                    let back = back_fraction(patches, eye, target, camera);
-                    if back <= 0.5 {
-                        return (eye, target);
-                    }
-                    if back < best.0 {
-                        best = (back, (eye, target));
+                for direction in [axis, -axis] {
+                    for pull in [1.6, 0.9, 0.6, 0.3, 0.0] {
+                        let eye = center + direction * (0.5 * len * pull);
+                        let target = eye - direction * radius;
+                        let seen = probe(patches, eye, target, camera);
+                        if seen.back_fraction <= 0.5 {
+                            let score = (seen.front_patches, seen.front_coverage);
+                            if best_front.is_none_or(|(s, _)| score > s) {
+                                best_front = Some((score, (eye, target)));
+                            }
+                        } else if seen.back_fraction < best.0 {
+                            best = (seen.back_fraction, (eye, target));
+                        }
                     }
                 }
             }
-            best.1
+            best_front.map_or(best.1, |(_, view)| view)
         }
     }
 }

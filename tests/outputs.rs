@@ -497,6 +497,38 @@ fn auto_framing_sees_the_scene_and_enters_closed_rooms() {
     assert_eq!(grey, 0);
 }
 
+/// A room open on the side away from the default outside view (as the Cornell box has no front
+/// wall, at -z): from outside the camera sees the back of the closed side, so it goes in, and
+/// looks in through the opening, so the picture is walls, not the black outside seen through it.
+#[test]
+fn auto_framing_looks_into_a_room_through_its_opening() {
+    let room = room_scene();
+    {
+        let open_z = 0.0;
+        let kept: Vec<usize> = (0..room.len())
+            .filter(|&t| !room.corners(t).iter().all(|c| c.z == open_z))
+            .collect();
+        assert_eq!(kept.len(), room.len() - 2);
+        let tris: Vec<[DVec3; 3]> = kept.iter().map(|&t| room.corners(t)).collect();
+        let albedo: Vec<[f64; 3]> = kept.iter().map(|&t| room.albedo[t]).collect();
+        let emission: Vec<[f64; 3]> = kept.iter().map(|&t| room.emission[t]).collect();
+        let open = Scene::from_triangles(&tris, &albedo, &emission);
+        let patches = build_patches(&open, None);
+        let camera = CameraOptions {
+            width: 64,
+            height: 48,
+            ..CameraOptions::default()
+        };
+        let img = render_rgb(&patches, &fake_solution(&patches), &camera);
+        let black = img.chunks(3).filter(|p| p == &[0, 0, 0]).count();
+        assert!(
+            black * 20 < 64 * 48,
+            "open at z = {open_z}: {black} of {} pixels show the outside",
+            64 * 48
+        );
+    }
+}
+
 #[test]
 fn auto_framing_stays_outside_a_closed_object() {
     // The same box with outward normals (a brick, not a room): viewed from outside.
