@@ -2,26 +2,14 @@
 //! with a real shadow, colour bleeding, and invariance under scaling and translation.
 
 use antiradiance::dense::solve_dense;
+use antiradiance::driver::error_against as error; // the design note's error, per input triangle
 use antiradiance::hierarchical::solve_hierarchical;
 use antiradiance::mesh::{build_patches, Patches};
 use antiradiance::progress::Progress;
 use antiradiance::reference::{solve_reference, ReferenceOptions};
-use antiradiance::scene::Scene;
 use antiradiance::scenes;
-use antiradiance::solution::{relative_error, Solution};
 use antiradiance::solve::SolverOptions;
 use glam::DVec3;
-
-fn error(scene: &Scene, estimate: &Solution, truth: &Solution) -> f64 {
-    let areas: Vec<f64> = (0..scene.len()).map(|t| scene.area(t)).collect();
-    let emissive: Vec<bool> = (0..scene.len()).map(|t| scene.is_emitter(t)).collect();
-    relative_error(
-        &areas,
-        &emissive,
-        &estimate.triangle_radiance,
-        &truth.triangle_radiance,
-    )
-}
 
 fn hidden() -> Progress {
     Progress::hidden()

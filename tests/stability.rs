@@ -12,13 +12,14 @@ use std::process::{Command, Output};
 
 use antiradiance::dense::solve_dense;
 use antiradiance::driver::cap_warning;
+use antiradiance::driver::error_against as error; // the design note's error, per input triangle
 use antiradiance::hierarchical::solve_hierarchical;
 use antiradiance::mesh::{build_patches, Patches};
 use antiradiance::progress::Progress;
 use antiradiance::reference::{solve_reference, ReferenceOptions};
 use antiradiance::scene::Scene;
 use antiradiance::scenes;
-use antiradiance::solution::{relative_error, Solution};
+use antiradiance::solution::Solution;
 use antiradiance::solve::SolverOptions;
 use glam::DVec3;
 use serde_json::Value;
@@ -143,18 +144,6 @@ fn solve_both(scene: &Scene, options: &SolverOptions) -> [(&'static str, Solutio
             solve_hierarchical(&patches, options, &hidden()),
         ),
     ]
-}
-
-/// The design note's error of `estimate` against `truth` over the triangles of `scene`.
-fn error(scene: &Scene, estimate: &Solution, truth: &Solution) -> f64 {
-    let areas: Vec<f64> = (0..scene.len()).map(|t| scene.area(t)).collect();
-    let emissive: Vec<bool> = (0..scene.len()).map(|t| scene.is_emitter(t)).collect();
-    relative_error(
-        &areas,
-        &emissive,
-        &estimate.triangle_radiance,
-        &truth.triangle_radiance,
-    )
 }
 
 /// Every per-triangle and per-patch value is finite and >= 0 (the default clamps negatives).

@@ -7,13 +7,14 @@ use std::process::{Command, Output};
 
 use antiradiance::dense::solve_dense;
 use antiradiance::direct::{solve_dense_direct, solve_hierarchical_direct};
+use antiradiance::driver::error_against as error; // the design note's error, per input triangle
 use antiradiance::hierarchical::solve_hierarchical;
 use antiradiance::mesh::{build_patches, Patches};
 use antiradiance::progress::Progress;
 use antiradiance::reference::{solve_reference, ReferenceOptions};
 use antiradiance::scene::Scene;
 use antiradiance::scenes;
-use antiradiance::solution::{relative_error, Solution};
+use antiradiance::solution::Solution;
 use antiradiance::solve::SolverOptions;
 use antiradiance::sweep::CSV_HEADER;
 use glam::DVec3;
@@ -42,17 +43,6 @@ fn occluder_obj() -> PathBuf {
 
 fn hidden() -> Progress {
     Progress::hidden()
-}
-
-fn error(scene: &Scene, estimate: &Solution, truth: &Solution) -> f64 {
-    let areas: Vec<f64> = (0..scene.len()).map(|t| scene.area(t)).collect();
-    let emissive: Vec<bool> = (0..scene.len()).map(|t| scene.is_emitter(t)).collect();
-    relative_error(
-        &areas,
-        &emissive,
-        &estimate.triangle_radiance,
-        &truth.triangle_radiance,
-    )
 }
 
 /// The two triangles of the quad a, b, c, d (counter-clockwise seen from its front).
