@@ -29,8 +29,9 @@
 //!   [`GROUP_SAMPLES`] samples share one fraction.
 //!
 //! Fully lit elements get exactly `U`, elements in umbra exactly 0, a well-sampled light wholly
-//! seen or wholly hidden counts fully or not at all; noise is confined to penumbrae. (Subtracting a Monte Carlo estimate of the blocked light from `U` instead, an
-//! unbiased control variate, leaves noise of either sign in umbrae.)
+//! seen or wholly hidden counts fully or not at all; noise is confined to penumbrae.
+//! (Subtracting a Monte Carlo estimate of the blocked light from `U` instead, an unbiased
+//! control variate, leaves noise of either sign in umbrae.)
 //!
 //! Sampling is seeded per element (the element's index), so results are reproducible and do not
 //! depend on thread scheduling. Shadow rays use the watertight test of [`crate::raytrace`].
@@ -78,8 +79,8 @@ pub const MAX_SHADOW_SAMPLES: usize = 1024;
 /// Fewest shadow rays of the pilot pass (a square; the pilot takes a quarter of the receiver's
 /// rays): a receiver whose pilot rays all agree (all visible or all blocked) gets no more, and
 /// is taken as wholly lit or wholly in shadow. Measured with 2M rays spread evenly (196 per
-/// receiver): on the room 55% of the receivers stopped there and
-/// the direct light takes about 30% less time; the result moves by 0.27% (design-note error
+/// receiver): on the room 55% of the receivers stopped there and the direct light took about
+/// 30% less time; the result moves by 0.27% (design-note error
 /// against the run without pilot) and its error against the path tracer does not move (2.13%
 /// with it, 2.16% without; bear in a room, bear and legoBrick within 0.12%). A pilot of 16
 /// rays stopped 71% but moved the room's result by 0.75%: thin penumbrae slipped between its
@@ -206,8 +207,7 @@ struct EmitterGroup {
 impl EmitterGroup {
     /// The member (index into [`Emitters`]) whose cumulative area interval holds `u` in [0, 1).
     fn pick(&self, u: f64) -> usize {
-        let i = self.member_cdf.partition_point(|&c| c <= u);
-        self.members[i.min(self.members.len() - 1)] as usize
+        self.members[interval_of(&self.member_cdf, u)] as usize
     }
 }
 
@@ -333,16 +333,7 @@ fn group_emitters(emitters: &Emitters) -> Vec<EmitterGroup> {
                 .iter()
                 .map(|&m| (emitters.geom[m as usize].normal - normal).length())
                 .fold(0.0, f64::max);
-            let mut member_cdf: Vec<f64> = members
-                .iter()
-                .scan(0.0, |acc, &m| {
-                    *acc += emitters.geom[m as usize].area;
-                    Some(*acc / area)
-                })
-                .collect();
-            if let Some(last) = member_cdf.last_mut() {
-                *last = 1.0;
-            }
+            let member_cdf = cumulative(members.iter().map(|&m| emitters.geom[m as usize].area));
             let member_radius = members
                 .iter()
                 .map(|&m| emitters.geom[m as usize].radius)
@@ -393,28 +384,34 @@ fn group_emitters(emitters: &Emitters) -> Vec<EmitterGroup> {
 /// form factor of any surface they bound that lies in front of `x` and faces it, in [0, 1].
 /// The same sum as [`geometry::point_form_factor`] over each of the surface's triangles.
 fn contour_form_factor(x: DVec3, n_x: DVec3, edges: &[(DVec3, DVec3)]) -> f64 {
-    contour_value(edges.iter().map(|&(a, b)| edge_term(x, n_x, a, b)).sum())
+    geometry::lambert_form_factor(
+        edges
+            .iter()
+            .map(|&(a, b)| geometry::lambert_edge(a - x, b - x, n_x))
+            .sum(),
+    )
 }
 
-/// One directed edge's term of Lambert's contour sum seen from `x` (normal `n_x`).
-fn edge_term(x: DVec3, n_x: DVec3, a: DVec3, b: DVec3) -> f64 {
-    let (a, b) = (a - x, b - x);
-    let cross = a.cross(b);
-    let cross_len = cross.length();
-    if cross_len == 0.0 {
-        return 0.0;
+/// The cumulative distribution of `weights` (not all 0, finite), the last entry exactly 1.
+fn cumulative(weights: impl Iterator<Item = f64>) -> Vec<f64> {
+    let weights: Vec<f64> = weights.collect();
+    let total: f64 = weights.iter().sum();
+    let mut cdf: Vec<f64> = weights
+        .iter()
+        .scan(0.0, |acc, w| {
+            *acc += w / total;
+            Some(*acc)
+        })
+        .collect();
+    if let Some(last) = cdf.last_mut() {
+        *last = 1.0;
     }
-    cross_len.atan2(a.dot(b)) * n_x.dot(cross) / cross_len
+    cdf
 }
 
-/// The form factor of a contour whose edge terms sum to `sum`, in [0, 1].
-fn contour_value(sum: f64) -> f64 {
-    let f = (sum / (2.0 * PI)).abs();
-    if f.is_finite() {
-        f.min(1.0)
-    } else {
-        0.0
-    }
+/// The entry of `cdf` (from [`cumulative`]) whose interval holds `u` in [0, 1).
+fn interval_of(cdf: &[f64], u: f64) -> usize {
+    cdf.partition_point(|&c| c <= u).min(cdf.len() - 1)
 }
 
 /// Receiver points per side for an element and an emitter at [`separation`] `ratio`: the rule
@@ -573,7 +570,7 @@ impl<'a> DirectLight<'a> {
     /// ([`contour_form_factor`]) at every receiver point that is clearly in front of all its
     /// members; otherwise (a group cut by the receiver's plane, a point near the group's plane)
     /// member by member. `lights` is cleared and receives every group with a positive form
-    /// factor (the distribution of [`Self::visible_fraction`]'s shadow rays).
+    /// factor (the distribution of [`Self::visible_light`]'s shadow rays).
     fn unoccluded(
         &self,
         r: &Element,
@@ -680,11 +677,11 @@ impl<'a> DirectLight<'a> {
                     let c = self.emitters.geom[k as usize].corners;
                     for (j, &across) in group.neighbours[i].iter().enumerate() {
                         if across == NO_NEIGHBOUR || !marked[across as usize] {
-                            sum += edge_term(x, r.normal, c[j], c[(j + 1) % 3]);
+                            sum += geometry::lambert_edge(c[j] - x, c[(j + 1) % 3] - x, r.normal);
                         }
                     }
                 }
-                contour_value(sum)
+                geometry::lambert_form_factor(sum)
             }
         };
         // Every member's centroid lies in the group's sphere, so no member is nearer the
@@ -732,16 +729,9 @@ impl<'a> DirectLight<'a> {
         let mut any_whole = false;
         for &k in &group.members {
             let s = &self.emitters.geom[k as usize];
-            // The sides as `clip_by_plane` sees them (heights within tol count as 0).
+            // The sides as `emitter_form_factor`'s clipping sees them.
             let tol = PLANE_EPS * receiver.size.max(s.size);
-            let height = s.corners.map(|c| {
-                let h = r.normal.dot(c - r.corners[0]);
-                if h.abs() <= tol {
-                    0.0
-                } else {
-                    h
-                }
-            });
+            let height = geometry::plane_heights(&s.corners, r.corners[0], r.normal, tol);
             let in_front = height.iter().all(|&h| h >= 0.0)
                 && height.iter().any(|&h| h > 0.0)
                 && self.emitters.patch[k as usize] != r.patch;
@@ -808,8 +798,9 @@ impl<'a> DirectLight<'a> {
     /// sees.) `V_g = sum g_i v_i / sum g_i` over the group's samples, with `g_i` a sample's
     /// unoccluded contribution and `v_i` its visibility (a ratio estimator, bias falling as
     /// 1/samples): a group wholly visible counts exactly `F_g`, a hidden one exactly 0, and
-    /// noise is confined to penumbrae. A group no sample carried light from takes the pooled
-    /// fraction of all groups (1 when no sample carried any).
+    /// noise is confined to penumbrae. Groups with fewer than [`GROUP_SAMPLES`] light-carrying
+    /// samples take the pooled fraction of all such groups' samples (failing that, of all
+    /// samples; 1 when no sample carried light).
     ///
     /// Sample i pairs the receiver point of stratum i (k x k jittered grid on the triangle) with
     /// a stratified choice of group and member (1-D strata over the distribution) and a
@@ -836,16 +827,7 @@ impl<'a> DirectLight<'a> {
                 [0, 1, 2].map(|c| acc[c] + u[c])
             });
         }
-        let mut cdf: Vec<f64> = lights
-            .iter()
-            .scan(0.0, |acc, l| {
-                *acc += weight(l) / total;
-                Some(*acc)
-            })
-            .collect();
-        if let Some(last) = cdf.last_mut() {
-            *last = 1.0;
-        }
+        let cdf = cumulative(lights.iter().map(weight));
         // A pilot of a quarter of the rays first; when they all agree (every ray that carries
         // light reaches it, or none does), the receiver is taken as wholly lit or wholly in
         // shadow.
@@ -933,7 +915,7 @@ impl<'a> DirectLight<'a> {
             // 2. A group by its light here, a member by area (the choice's position within the
             //    group's interval, rescaled, keeps the strata), and a point on the member.
             let u = ((choice_perm[i] as f64 + rng.next_f64()) * inv_n).min(1.0 - f64::EPSILON);
-            let j = cdf.partition_point(|&c| c <= u).min(lights.len() - 1);
+            let j = interval_of(cdf, u);
             let low = if j == 0 { 0.0 } else { cdf[j - 1] };
             let probability = cdf[j] - low;
             if !(probability > 0.0) {

@@ -122,17 +122,31 @@ pub fn solid_angle(x: DVec3, tri: &Tri) -> f64 {
 /// front of `x` (clip it first with [`clip_to_front`]); then the result is in [0, 1].
 pub fn point_form_factor(x: DVec3, n_x: DVec3, tri: &Tri) -> f64 {
     let r = [tri[0] - x, tri[1] - x, tri[2] - x];
-    let mut sum = 0.0;
-    for i in 0..3 {
-        let (a, b) = (r[i], r[(i + 1) % 3]);
-        let cross = a.cross(b);
-        let cross_len = cross.length();
-        if cross_len == 0.0 {
-            continue;
-        }
-        let theta = atan2_upper(cross_len, a.dot(b));
-        sum += theta * n_x.dot(cross) / cross_len;
+    lambert_form_factor(
+        (0..3)
+            .map(|i| lambert_edge(r[i], r[(i + 1) % 3], n_x))
+            .sum(),
+    )
+}
+
+/// One directed edge's term of Lambert's contour sum: the edge from `a` to `b` (relative to the
+/// viewing point), seen with normal `n_x`. A closed contour's terms summed and passed to
+/// [`lambert_form_factor`] give its point form factor; an edge shared by two triangles with
+/// opposite directions cancels.
+#[inline]
+pub fn lambert_edge(a: DVec3, b: DVec3, n_x: DVec3) -> f64 {
+    let cross = a.cross(b);
+    let cross_len = cross.length();
+    if cross_len == 0.0 {
+        return 0.0;
     }
+    atan2_upper(cross_len, a.dot(b)) * n_x.dot(cross) / cross_len
+}
+
+/// The point form factor of a contour whose [`lambert_edge`] terms sum to `sum`, in [0, 1] (0
+/// when the sum is not finite).
+#[inline]
+pub fn lambert_form_factor(sum: f64) -> f64 {
     let f = (sum / (2.0 * std::f64::consts::PI)).abs();
     if f.is_finite() {
         f.min(1.0)
@@ -144,22 +158,12 @@ pub fn point_form_factor(x: DVec3, n_x: DVec3, tri: &Tri) -> f64 {
 /// [`point_form_factor`] of a convex polygon (its edges' Lambert sum: the fan's inner edges of a
 /// quadrilateral cancel, so they are not evaluated). Same precondition.
 pub fn point_form_factor_poly(x: DVec3, n_x: DVec3, poly: &Poly) -> f64 {
-    let mut sum = 0.0;
-    for i in 0..poly.len {
-        let (a, b) = (poly.v[i] - x, poly.v[(i + 1) % poly.len] - x);
-        let cross = a.cross(b);
-        let cross_len = cross.length();
-        if cross_len == 0.0 {
-            continue;
-        }
-        sum += atan2_upper(cross_len, a.dot(b)) * n_x.dot(cross) / cross_len;
-    }
-    let f = (sum / (2.0 * std::f64::consts::PI)).abs();
-    if f.is_finite() {
-        f.min(1.0)
-    } else {
-        0.0
-    }
+    let n = poly.len;
+    lambert_form_factor(
+        (0..n)
+            .map(|i| lambert_edge(poly.v[i] - x, poly.v[(i + 1) % n] - x, n_x))
+            .sum(),
+    )
 }
 
 /// [`point_form_factor_poly`] and the solid angle of `poly` (sum of [`solid_angle`] over its
@@ -175,18 +179,11 @@ pub fn poly_form_factor_solid_angle(x: DVec3, n_x: DVec3, poly: &Poly) -> (f64, 
         r[i] = poly.v[i] - x;
         len[i] = r[i].length();
     }
-    let mut sum = 0.0;
-    for i in 0..n {
-        let (a, b) = (r[i], r[(i + 1) % n]);
-        let cross = a.cross(b);
-        let cross_len = cross.length();
-        if cross_len == 0.0 {
-            continue;
-        }
-        sum += atan2_upper(cross_len, a.dot(b)) * n_x.dot(cross) / cross_len;
-    }
-    let f = (sum / (2.0 * std::f64::consts::PI)).abs();
-    let f = if f.is_finite() { f.min(1.0) } else { 0.0 };
+    let f = lambert_form_factor(
+        (0..n)
+            .map(|i| lambert_edge(r[i], r[(i + 1) % n], n_x))
+            .sum(),
+    );
     // Fan triangles (0, i, i + 1): Van Oosterom and Strackee, as in `solid_angle`.
     let mut omega = 0.0;
     let (a, la) = (r[0], len[0]);
@@ -221,11 +218,23 @@ impl Poly {
     }
 }
 
+/// Signed heights of `tri`'s corners over the plane through `p` with normal `n`, those within
+/// `tol` of it counted as 0: the sides [`clip_by_plane`] sees them on.
+pub fn plane_heights(tri: &Tri, p: DVec3, n: DVec3, tol: f64) -> [f64; 3] {
+    tri.map(|c| {
+        let h = n.dot(c - p);
+        if h.abs() <= tol {
+            0.0
+        } else {
+            h
+        }
+    })
+}
+
 /// Splits `tri` by the plane through `p` with normal `n` into the part strictly in front
 /// (`n . (y - p) > 0`) and the part behind. Points within `tol` of the plane count as on it.
 pub fn clip_by_plane(tri: &Tri, p: DVec3, n: DVec3, tol: f64) -> (Poly, Poly) {
-    let d = [n.dot(tri[0] - p), n.dot(tri[1] - p), n.dot(tri[2] - p)];
-    let d = d.map(|x| if x.abs() <= tol { 0.0 } else { x });
+    let d = plane_heights(tri, p, n, tol);
     let mut front = Poly::default();
     let mut back = Poly::default();
     for i in 0..3 {
