@@ -235,7 +235,9 @@ struct Found {
 impl Found {
     /// The pieces' findings in order, each array concatenated once (into exact capacity),
     /// freeing each piece's array as soon as it is copied (so the peak is the result plus one
-    /// piece, not twice the result: 52M cluster links at 1M triangles are 2 GB).
+    /// piece, not twice the result: 52M cluster links at 1M triangles are 2 GB). Their deferred
+    /// pairs must have been taken (they are between rounds); the exact-pair counts are made
+    /// from the final pairs.
     fn concat(mut pieces: Vec<Found>) -> Found {
         fn gather<T: Copy>(
             pieces: &mut [Found],
@@ -249,18 +251,14 @@ impl Found {
         }
         let mut stats = LinkStats::default();
         for p in &pieces {
-            let (a, b) = (&mut stats, &p.stats);
-            a.culled_pairs += b.culled_pairs;
-            a.silent_links += b.silent_links;
-            a.exact_apart += b.exact_apart;
-            a.exact_touching += b.exact_touching;
-            a.leaf_splits += b.leaf_splits;
+            stats.culled_pairs += p.stats.culled_pairs;
+            stats.silent_links += p.stats.silent_links;
         }
         Found {
             cluster: gather(&mut pieces, |p| &mut p.cluster),
             exact: gather(&mut pieces, |p| &mut p.exact),
             culled: gather(&mut pieces, |p| &mut p.culled),
-            deferred: gather(&mut pieces, |p| &mut p.deferred),
+            deferred: Vec::new(),
             stats,
         }
     }
@@ -373,11 +371,6 @@ impl Traversal<'_> {
         let r_can = !rn.is_leaf() || leaf_splittable(rn, sn);
         let split_s = match (s_can, r_can) {
             (false, false) => {
-                if gap > 0.0 {
-                    found.stats.exact_apart += 1;
-                } else {
-                    found.stats.exact_touching += 1;
-                }
                 found.exact.push((s, r));
                 return;
             }
@@ -385,14 +378,11 @@ impl Traversal<'_> {
             (false, true) => false,
             (true, true) => sn.radius >= rn.radius,
         };
-        let n = &tree.nodes[if split_s { s } else { r } as usize];
-        if n.is_leaf() {
+        if tree.nodes[if split_s { s } else { r } as usize].is_leaf() {
             found.deferred.push((s, r, split_s));
             return;
         }
-        for c in n.first_child..n.first_child + n.child_count as u32 {
-            push(if split_s { (c, r) } else { (s, c) });
-        }
+        split_pair(tree, (s, r), split_s, push);
     }
 
     /// Everything below `pairs`, in parallel, appended to `pieces`: each task walks its pairs
@@ -415,6 +405,26 @@ impl Traversal<'_> {
             .collect();
         pieces.extend(found);
     }
+}
+
+/// Hands `push` the pairs node pair (s, r) splits into: the children of `s` against `r` when
+/// `split_s`, else `s` against the children of `r`.
+fn split_pair(
+    tree: &ClusterTree,
+    (s, r): (u32, u32),
+    split_s: bool,
+    mut push: impl FnMut((u32, u32)),
+) {
+    let n = &tree.nodes[if split_s { s } else { r } as usize];
+    for c in n.first_child..n.first_child + n.child_count as u32 {
+        push(if split_s { (c, r) } else { (s, c) });
+    }
+}
+
+/// The gap between the bounding spheres of nodes `s` and `r` (negative when they overlap).
+fn sphere_gap(tree: &ClusterTree, s: u32, r: u32) -> f64 {
+    let (sn, rn) = (&tree.nodes[s as usize], &tree.nodes[r as usize]);
+    (rn.center - sn.center).length() - sn.radius - rn.radius
 }
 
 /// Node pairs handed to the parallel traversal at a time, at least (the tree's top is expanded
@@ -451,8 +461,10 @@ pub fn refine(
         // 1. Expand the top breadth first until there is work for every thread.
         let mut queue: std::collections::VecDeque<(u32, u32)> = pairs.drain(..).collect();
         let mut top = Found::default();
-        while !queue.is_empty() && queue.len() < PARALLEL_PAIRS {
-            let pair = queue.pop_front().expect("not empty");
+        while queue.len() < PARALLEL_PAIRS {
+            let Some(pair) = queue.pop_front() else {
+                break;
+            };
             traversal.visit(pair, &mut top, |q| queue.push_back(q));
         }
         let first_piece = pieces.len();
@@ -476,10 +488,7 @@ pub fn refine(
         }
         leaf_splits += to_split.len() as u64;
         for (s, r, split_s) in deferred {
-            let n = &tree.nodes[if split_s { s } else { r } as usize];
-            for c in n.first_child..n.first_child + n.child_count as u32 {
-                pairs.push(if split_s { (c, r) } else { (s, c) });
-            }
+            split_pair(tree, (s, r), split_s, |q| pairs.push(q));
         }
         // 4. Exact pairs recorded against a leaf that is now split are decided again next round,
         //    below its pieces (where a serial walk that met the split first would have gone).
@@ -489,19 +498,12 @@ pub fn refine(
                 is_split[node as usize] = true;
             }
             for piece in &mut pieces {
-                let Found { exact, stats, .. } = piece;
-                exact.retain(|&(s, r)| {
-                    if !(is_split[s as usize] || is_split[r as usize]) {
-                        return true;
+                piece.exact.retain(|&(s, r)| {
+                    let redo = is_split[s as usize] || is_split[r as usize];
+                    if redo {
+                        pairs.push((s, r));
                     }
-                    let (sn, rn) = (&tree.nodes[s as usize], &tree.nodes[r as usize]);
-                    if (rn.center - sn.center).length() - sn.radius - rn.radius > 0.0 {
-                        stats.exact_apart -= 1;
-                    } else {
-                        stats.exact_touching -= 1;
-                    }
-                    pairs.push((s, r));
-                    false
+                    !redo
                 });
             }
         }
@@ -514,6 +516,13 @@ pub fn refine(
         ..
     } = Found::concat(pieces);
     stats.leaf_splits = leaf_splits;
+    for &(s, r) in &exact_pairs {
+        if sphere_gap(tree, s, r) > 0.0 {
+            stats.exact_apart += 1;
+        } else {
+            stats.exact_touching += 1;
+        }
+    }
     tree.finalize();
     stats.exact_pairs = exact_pairs.len() as u64;
     let t_traversed = std::time::Instant::now();
