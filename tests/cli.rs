@@ -2,9 +2,12 @@
 //! directories (and one shipped scene): outputs, reports, messages, exit codes.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
 use serde_json::Value;
+
+mod common;
+use common::{run, s, stderr};
 
 /// A light above a one-sided plate above a floor, plus one zero-area triangle: 7 triangles.
 ///
@@ -56,21 +59,6 @@ fn tiny_scene(dir: &Path) -> PathBuf {
     let obj = dir.join("tiny.obj");
     std::fs::write(&obj, TINY_OBJ).unwrap();
     obj
-}
-
-fn run(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_antiradiance"))
-        .args(args)
-        .output()
-        .expect("run the antiradiance binary")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 temp path")
 }
 
 /// The four output files in `dir`.

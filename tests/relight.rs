@@ -20,6 +20,9 @@ use antiradiance::Error;
 use glam::DVec3;
 use serde_json::Value;
 
+mod common;
+use common::{run, s};
+
 // ---------------------------------------------------------------------------------------------
 // Helpers
 
@@ -511,17 +514,6 @@ fn sweep_moves_a_spot_across_the_emitters() {
 
 // ---------------------------------------------------------------------------------------------
 // The command line
-
-fn run(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_antiradiance"))
-        .args(args)
-        .output()
-        .expect("run the antiradiance binary")
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 temp path")
-}
 
 fn png_size(path: &Path) -> (u32, u32) {
     let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));

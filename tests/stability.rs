@@ -8,7 +8,6 @@
 //! not cover. `docs/stability.md` records what each one showed.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 use antiradiance::dense::solve_dense;
 use antiradiance::driver::cap_warning;
@@ -23,6 +22,9 @@ use antiradiance::solution::Solution;
 use antiradiance::solve::SolverOptions;
 use glam::DVec3;
 use serde_json::Value;
+
+mod common;
+use common::{run, s};
 
 // ---------------------------------------------------------------------------------------------
 // Scene building
@@ -711,17 +713,6 @@ fn emission_1e_minus_30_and_1e30_scale_exactly() {
 
 // ---------------------------------------------------------------------------------------------
 // The command line: outputs, warnings, negative radiance
-
-fn run(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_antiradiance"))
-        .args(args)
-        .output()
-        .expect("run the antiradiance binary")
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 path")
-}
 
 /// Writes `scene` as OBJ + MTL (one material per distinct albedo/emission) into `dir`.
 fn write_scene(dir: &Path, scene: &Scene) -> PathBuf {

@@ -5,9 +5,7 @@
 //! Every test runs on meshes generated here; the one test on the seed meshes
 //! (`../shared/meshes`) skips when they are absent.
 
-use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 use antiradiance::output::read_triangles_csv;
 use antiradiance::scene::{load_obj, Scene, SceneOptions};
@@ -18,20 +16,8 @@ use antiradiance::scenes::{
 use antiradiance::Error;
 use glam::DVec3;
 
-fn run(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_antiradiance"))
-        .args(args)
-        .output()
-        .expect("run antiradiance")
-}
-
-fn stderr(out: &Output) -> String {
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
+mod common;
+use common::{assert_closed, run, s, stderr};
 
 fn load(path: &Path) -> Scene {
     let scene = load_obj(path, &SceneOptions::default()).unwrap();
@@ -64,27 +50,6 @@ fn write_mesh(dir: &Path, name: &str, scene: &Scene) -> PathBuf {
     let path = dir.join(format!("{name}.obj"));
     write_obj(scene, &path, "test mesh").unwrap();
     path
-}
-
-/// Asserts that triangles `range` of `scene` form a closed, consistently oriented mesh: every
-/// directed edge (by exact corner positions) is matched by its reverse exactly once.
-fn assert_closed(scene: &Scene, range: std::ops::Range<usize>) {
-    let key = |p: DVec3| p.to_array().map(|x| (x + 0.0).to_bits());
-    let mut edges: HashMap<([u64; 3], [u64; 3]), usize> = HashMap::new();
-    for t in range {
-        let c = scene.corners(t);
-        for e in 0..3 {
-            *edges.entry((key(c[e]), key(c[(e + 1) % 3]))).or_default() += 1;
-        }
-    }
-    for (&(a, b), &n) in &edges {
-        assert_eq!(n, 1, "directed edge used {n} times");
-        assert_eq!(
-            edges.get(&(b, a)),
-            Some(&1),
-            "edge without an opposite twin"
-        );
-    }
 }
 
 /// The first `object.len()` triangles of `scene` are `object`'s, bit for bit, with the same
@@ -126,7 +91,7 @@ fn check_room(object: &Scene, scene: &Scene) {
     assert!(lo.cmpgt(room.min - DVec3::Y).all() && hi.cmplt(room.max).all());
     assert!((room.max.y - room.min.y) > 1.5 * (hi.y - lo.y));
     // The room: closed, every triangle facing the inside, grey materials.
-    assert_closed(scene, n..scene.len());
+    assert_closed(scene, n..scene.len(), "the room around the mesh");
     let mut emitters = 0;
     for t in n..scene.len() {
         let inward = rc - centroid(scene, t);

@@ -3,7 +3,6 @@
 //! against the path tracer, and hostile geometry that must never produce NaN.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 use antiradiance::dense::solve_dense;
 use antiradiance::direct::{solve_dense_direct, solve_hierarchical_direct};
@@ -19,23 +18,11 @@ use antiradiance::solve::SolverOptions;
 use antiradiance::sweep::CSV_HEADER;
 use glam::DVec3;
 
+mod common;
+use common::{run, s, stderr};
+
 // ---------------------------------------------------------------------------------------------
 // Helpers
-
-fn run(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_antiradiance"))
-        .args(args)
-        .output()
-        .expect("run the antiradiance binary")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 temp path")
-}
 
 fn occluder_obj() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/occluder.obj")
