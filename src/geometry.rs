@@ -330,13 +330,8 @@ mod tests {
 
     #[test]
     fn atan2_upper_matches_libm() {
-        let mut state = 7u64;
-        let mut rnd = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = crate::sampling::Rng::new(7, 0);
+        let mut rnd = || rng.next_f64();
         for _ in 0..100_000 {
             let (y, x) = (rnd() * 3.0, rnd() * 4.0 - 2.0);
             let (got, want) = (atan2_upper(y, x), y.atan2(x));

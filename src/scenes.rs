@@ -64,6 +64,16 @@ struct Builder {
     current: Option<&'static str>,
 }
 
+/// The point of the plane `axis = level` (0, 1, 2 for x, y, z) at coordinates `u`, `v` along the
+/// two other axes, in cyclic order after `axis`.
+fn plane_point(axis: usize, level: f64, u: f64, v: f64) -> DVec3 {
+    let mut p = [0.0; 3];
+    p[axis] = level;
+    p[(axis + 1) % 3] = u;
+    p[(axis + 2) % 3] = v;
+    DVec3::from_array(p)
+}
+
 impl Builder {
     fn triangle(&mut self, tri: [DVec3; 3], albedo: [f64; 3], emission: [f64; 3]) {
         self.corners.push(tri);
@@ -110,13 +120,7 @@ impl Builder {
         albedo: [f64; 3],
         emission: [f64; 3],
     ) {
-        let point = |u: f64, v: f64| {
-            let mut p = [0.0; 3];
-            p[axis] = level;
-            p[(axis + 1) % 3] = u;
-            p[(axis + 2) % 3] = v;
-            DVec3::from_array(p)
-        };
+        let point = |u: f64, v: f64| plane_point(axis, level, u, v);
         let us: Vec<f64> = (0..=n).map(|i| lerp_steps(u0, u1, i, n)).collect();
         let vs: Vec<f64> = (0..=m).map(|j| lerp_steps(v0, v1, j, m)).collect();
         for j in 0..m {
@@ -560,13 +564,7 @@ pub fn in_room(object: &Scene, light_radiance: f64) -> Result<Scene> {
                 (vs, j): (&[f64; 4], usize),
                 albedo: [f64; 3],
                 emission: [f64; 3]| {
-        let point = |u: f64, v: f64| {
-            let mut p = [0.0; 3];
-            p[axis] = level;
-            p[(axis + 1) % 3] = u;
-            p[(axis + 2) % 3] = v;
-            DVec3::from_array(p)
-        };
+        let point = |u: f64, v: f64| plane_point(axis, level, u, v);
         let q = [
             point(us[i], vs[j]),
             point(us[i + 1], vs[j]),
