@@ -198,12 +198,16 @@ fn spread_part(
         if !(w > 0.0) {
             continue;
         }
+        let to_piece = geometry::centroid(&piece) - x;
+        // Only each bin's share of the part's form factor is used ([`Spread`]): a piece is
+        // small against a bin, so its projected solid angle is its solid angle times the
+        // cosine towards its centroid, to second order in its size.
         let f = if with_ff {
-            geometry::point_form_factor(x, n_x, &piece)
+            w * n_x.dot(to_piece.normalize_or_zero()).max(0.0)
         } else {
             0.0
         };
-        let bin = bins.bin_of(x - geometry::centroid(&piece)) as u16;
+        let bin = bins.bin_of(-to_piece) as u16;
         add_point_bin(acc, bin, f, w);
     }
 }
@@ -296,6 +300,9 @@ pub struct Receiver {
     spread_points: SmallVec<[DVec3; 4]>,
     /// For each quadrature point, the index of its nearest spreading point.
     nearest: Vec<u8>,
+    /// The quadrature points by groups of [`geometry::LANES`] (x, y, z arrays; the last group
+    /// padded with copies of the last point), for the vectorized kernel.
+    lanes: Vec<[geometry::Lanes; 3]>,
 }
 
 impl Receiver {
@@ -325,12 +332,26 @@ impl Receiver {
                 best as u8
             })
             .collect();
+        let lanes = points
+            .chunks(geometry::LANES)
+            .map(|chunk| {
+                let mut group = [[0.0; geometry::LANES]; 3];
+                for l in 0..geometry::LANES {
+                    let p = chunk[l.min(chunk.len() - 1)];
+                    group[0][l] = p.x;
+                    group[1][l] = p.y;
+                    group[2][l] = p.z;
+                }
+                group.map(geometry::Lanes::new)
+            })
+            .collect();
         Receiver {
             geom,
             q,
             points,
             spread_points,
             nearest,
+            lanes,
         }
     }
 
@@ -401,6 +422,16 @@ pub fn couple(
         .map(|&x| Spread::new(x, r.normal, &front, &back, bins, params))
         .collect();
     let weight = 1.0 / points.len() as f64;
+    // The front part's form factor and solid angle at every point, a group of points at a time.
+    let mut front_seen: SmallVec<[(f64, f64); 36]> = SmallVec::new();
+    if far {
+        front_seen.push(poly_ff_omega(r.centroid, r.normal, &front, true));
+    } else {
+        for group in &receiver.lanes {
+            let (f, w) = geometry::poly_form_factor_solid_angle_lanes(group, r.normal, &front);
+            front_seen.extend(f.to_array().into_iter().zip(w.to_array()));
+        }
+    }
     let mut acc = PointBins::new();
     for (k, &x) in points.iter().enumerate() {
         // The sender's B reaches x only if x is in front of it; its antiradiance leaves through
@@ -413,7 +444,7 @@ pub fn couple(
             &spreads[receiver.nearest[k] as usize]
         };
         acc.clear();
-        let (f_front, w_front) = poly_ff_omega(x, r.normal, &front, true);
+        let (f_front, w_front) = front_seen[k];
         for &(bin, f_frac, w_frac) in &spread.front {
             add_point_bin(&mut acc, bin, f_front * f_frac, w_front * w_frac);
         }
