@@ -292,6 +292,31 @@ pub fn poly_form_factor_solid_angle_lanes(
     (f, omega)
 }
 
+/// [`solid_angle`] of `tri` seen from `LANES` points at once (their x, y and z coordinates in
+/// `points`). Equal to the one-point function to rounding.
+pub fn solid_angle_lanes(points: &[Lanes; 3], tri: &Tri) -> Lanes {
+    let zero = Lanes::ZERO;
+    let r = tri.map(|v| {
+        [
+            Lanes::splat(v.x) - points[0],
+            Lanes::splat(v.y) - points[1],
+            Lanes::splat(v.z) - points[2],
+        ]
+    });
+    let [la, lb, lc] = r.map(|v| dot_lanes(&v, &v).sqrt());
+    let [a, b, c] = &r;
+    let b_cross_c = [
+        b[1] * c[2] - b[2] * c[1],
+        b[2] * c[0] - b[0] * c[2],
+        b[0] * c[1] - b[1] * c[0],
+    ];
+    let num = dot_lanes(a, &b_cross_c).abs();
+    let den = la * lb * lc + dot_lanes(a, b) * lc + dot_lanes(a, c) * lb + dot_lanes(b, c) * la;
+    let w = atan2_upper_lanes(num, den) * 2.0;
+    let valid = la.simd_gt(zero) & lb.simd_gt(zero) & lc.simd_gt(zero) & w.is_finite();
+    valid.select(w, zero)
+}
+
 #[inline(always)]
 fn dot_lanes(a: &[Lanes; 3], b: &[Lanes; 3]) -> Lanes {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
@@ -485,11 +510,15 @@ mod tests {
             ];
             let (f, w) = poly_form_factor_solid_angle_lanes(&lanes, n_x, &poly);
             let (f, w) = (f.to_array(), w.to_array());
+            let first = [poly.v[0], poly.v[1], poly.v[2]];
+            let w_first = solid_angle_lanes(&lanes, &first).to_array();
             for (l, &x) in points.iter().enumerate() {
                 let (f1, w1) = poly_form_factor_solid_angle(x, n_x, &poly);
                 worst = worst
                     .max((f[l] - f1).abs())
                     .max((w[l] - w1).abs() / w1.max(1e-3));
+                let w2 = solid_angle(x, &first);
+                worst = worst.max((w_first[l] - w2).abs() / w2.max(1e-3));
                 assert!(f[l].is_finite() && w[l].is_finite());
             }
         }

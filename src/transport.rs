@@ -145,19 +145,18 @@ fn add_point_bin(acc: &mut PointBins, bin: u16, f: f64, omega: f64) {
     }
 }
 
-/// Spreads one sender part (a triangle clipped to one side of the receiver's plane) seen from `x`
-/// over the bins it covers, splitting it into pieces of at most `piece_fraction` of the smallest
+/// Spreads one sender part (a triangle clipped to one side of the receiver's plane) of solid
+/// angle `omega` seen from `x` over the bins it covers, splitting it into pieces of at most `piece_fraction` of the smallest
 /// bin's solid angle (at most 8 x 8 pieces). `with_ff`: also accumulate the form factor.
 fn spread_part(
     x: DVec3,
     n_x: DVec3,
-    part: &Tri,
+    (part, omega): (&Tri, f64),
     with_ff: bool,
     bins: &Bins,
     params: &CouplingParams,
     acc: &mut PointBins,
 ) {
-    let omega = geometry::solid_angle(x, part);
     if !(omega > 0.0) {
         return;
     }
@@ -220,10 +219,12 @@ struct Spread {
 }
 
 impl Spread {
+    /// The spread at `x` of the `front` parts (their solid angles at `x` in `front_omega`) and,
+    /// two-sided, of the `back` parts.
     fn new(
         x: DVec3,
         n_x: DVec3,
-        front: &Poly,
+        (front, front_omega): (&[Tri], [f64; 2]),
         back: &Poly,
         bins: &Bins,
         params: &CouplingParams,
@@ -232,12 +233,21 @@ impl Spread {
             front: PointBins::new(),
             back: PointBins::new(),
         };
-        for part in front.triangles() {
-            spread_part(x, n_x, &part, true, bins, params, &mut spread.front);
+        for (part, &omega) in front.iter().zip(&front_omega) {
+            spread_part(x, n_x, (part, omega), true, bins, params, &mut spread.front);
         }
         if params.two_sided {
             for part in back.triangles() {
-                spread_part(x, n_x, &part, false, bins, params, &mut spread.back);
+                let omega = geometry::solid_angle(x, &part);
+                spread_part(
+                    x,
+                    n_x,
+                    (&part, omega),
+                    false,
+                    bins,
+                    params,
+                    &mut spread.back,
+                );
             }
         }
         for list in [&mut spread.front, &mut spread.back] {
@@ -303,6 +313,8 @@ pub struct Receiver {
     /// The quadrature points by groups of [`geometry::LANES`] (x, y, z arrays; the last group
     /// padded with copies of the last point), for the vectorized kernel.
     lanes: Vec<[geometry::Lanes; 3]>,
+    /// The spreading points likewise (padded with copies of the last).
+    spread_lanes: [geometry::Lanes; 3],
 }
 
 impl Receiver {
@@ -332,19 +344,16 @@ impl Receiver {
                 best as u8
             })
             .collect();
-        let lanes = points
-            .chunks(geometry::LANES)
-            .map(|chunk| {
-                let mut group = [[0.0; geometry::LANES]; 3];
-                for l in 0..geometry::LANES {
-                    let p = chunk[l.min(chunk.len() - 1)];
-                    group[0][l] = p.x;
-                    group[1][l] = p.y;
-                    group[2][l] = p.z;
-                }
-                group.map(geometry::Lanes::new)
-            })
-            .collect();
+        let to_lanes = |chunk: &[DVec3]| {
+            let point = |l: usize| chunk[l.min(chunk.len() - 1)];
+            [
+                geometry::Lanes::new(std::array::from_fn(|l| point(l).x)),
+                geometry::Lanes::new(std::array::from_fn(|l| point(l).y)),
+                geometry::Lanes::new(std::array::from_fn(|l| point(l).z)),
+            ]
+        };
+        let lanes = points.chunks(geometry::LANES).map(to_lanes).collect();
+        let spread_lanes = to_lanes(&spread_points);
         Receiver {
             geom,
             q,
@@ -352,6 +361,7 @@ impl Receiver {
             spread_points,
             nearest,
             lanes,
+            spread_lanes,
         }
     }
 
@@ -417,9 +427,23 @@ pub fn couple(
     } else {
         (&receiver.points, &receiver.spread_points)
     };
+    // The front parts' solid angles at the spreading points (four at a time when near).
+    let front_parts: SmallVec<[Tri; 2]> = front.triangles().collect();
+    let mut front_omega = [[0.0; geometry::LANES]; 2];
+    for (part, omega) in front_parts.iter().zip(&mut front_omega) {
+        if far {
+            omega[0] = geometry::solid_angle(r.centroid, part);
+        } else {
+            *omega = geometry::solid_angle_lanes(&receiver.spread_lanes, part).to_array();
+        }
+    }
     let spreads: SmallVec<[Spread; 4]> = spread_points
         .iter()
-        .map(|&x| Spread::new(x, r.normal, &front, &back, bins, params))
+        .enumerate()
+        .map(|(k, &x)| {
+            let omega = [front_omega[0][k], front_omega[1][k]];
+            Spread::new(x, r.normal, (&front_parts, omega), &back, bins, params)
+        })
         .collect();
     let weight = 1.0 / points.len() as f64;
     // The front part's form factor and solid angle at every point, a group of points at a time.
