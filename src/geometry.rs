@@ -292,17 +292,55 @@ pub fn poly_form_factor_solid_angle_lanes(
     (f, omega)
 }
 
+/// Up to `LANES` points as x, y and z lanes, the last point repeated to fill them.
+///
+/// # Panics
+/// When `points` is empty.
+pub fn lanes_of(points: &[DVec3]) -> [Lanes; 3] {
+    let point = |l: usize| points[l.min(points.len() - 1)];
+    [
+        Lanes::new(std::array::from_fn(|l| point(l).x)),
+        Lanes::new(std::array::from_fn(|l| point(l).y)),
+        Lanes::new(std::array::from_fn(|l| point(l).z)),
+    ]
+}
+
 /// [`solid_angle`] of `tri` seen from `LANES` points at once (their x, y and z coordinates in
 /// `points`). Equal to the one-point function to rounding.
 pub fn solid_angle_lanes(points: &[Lanes; 3], tri: &Tri) -> Lanes {
-    let zero = Lanes::ZERO;
-    let r = tri.map(|v| {
+    solid_angle_of_corner_vectors(tri.map(|v| {
         [
             Lanes::splat(v.x) - points[0],
             Lanes::splat(v.y) - points[1],
             Lanes::splat(v.z) - points[2],
         ]
-    });
+    }))
+}
+
+/// [`solid_angle`] of up to `LANES` triangles `tris` seen from one point `x`, in the first
+/// `tris.len()` lanes (the others repeat the last triangle's).
+///
+/// # Panics
+/// When `tris` is empty.
+pub fn solid_angles_at(x: DVec3, tris: &[Tri]) -> Lanes {
+    let corner = |k: usize| {
+        lanes_of(
+            &tris
+                .iter()
+                .map(|t| t[k])
+                .collect::<smallvec::SmallVec<[DVec3; LANES]>>(),
+        )
+    };
+    solid_angle_of_corner_vectors(std::array::from_fn(|k| {
+        let c = corner(k);
+        [c[0] - x.x, c[1] - x.y, c[2] - x.z]
+    }))
+}
+
+/// Van Oosterom and Strackee's solid angle from the corner vectors (corner minus viewpoint).
+#[inline(always)]
+fn solid_angle_of_corner_vectors(r: [[Lanes; 3]; 3]) -> Lanes {
+    let zero = Lanes::ZERO;
     let [la, lb, lc] = r.map(|v| dot_lanes(&v, &v).sqrt());
     let [a, b, c] = &r;
     let b_cross_c = [
@@ -519,6 +557,13 @@ mod tests {
                     .max((w[l] - w1).abs() / w1.max(1e-3));
                 let w2 = solid_angle(x, &first);
                 worst = worst.max((w_first[l] - w2).abs() / w2.max(1e-3));
+                // The fan's triangles seen from this one point.
+                let fan: Vec<Tri> = poly.triangles().collect();
+                let w_fan = solid_angles_at(x, &fan).to_array();
+                for (k, t) in fan.iter().enumerate() {
+                    let w3 = solid_angle(x, t);
+                    worst = worst.max((w_fan[k] - w3).abs() / w3.max(1e-3));
+                }
                 assert!(f[l].is_finite() && w[l].is_finite());
             }
         }

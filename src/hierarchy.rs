@@ -288,11 +288,17 @@ impl ClusterTree {
         // n_t . y - d_t = n_t . (c_s - c_r) + n_t . (y - c_s) + (n_t . c_r - d_t)
         //              <= max over the cone of n . D   +   r_s   +   height(r).
         let dv = center - rn.center;
+        // The cone's axis is one of its normals, so the bound is at least axis . D: most pairs
+        // are decided by that alone, without a square root.
+        let axis_dot = rn.cone_axis.dot(dv);
+        if axis_dot + radius + rn.height > tol {
+            return false;
+        }
         let len = dv.length();
         let max_dot = if len > 0.0 {
             // cos(max(0, theta - alpha)), theta the angle between the axis and D, alpha the
             // cone's half-angle: 1 when D is inside the cone, else cos(theta - alpha).
-            let cos_theta = (rn.cone_axis.dot(dv) / len).clamp(-1.0, 1.0);
+            let cos_theta = (axis_dot / len).clamp(-1.0, 1.0);
             let cos_alpha = rn.cone_cos.clamp(-1.0, 1.0);
             if cos_theta >= cos_alpha {
                 len

@@ -159,11 +159,10 @@ fn sphere_solid_angle(r: f64, d: f64) -> f64 {
 
 /// Largest solid angle leaf triangle `to` subtends at the corners and centroid of leaf `from`.
 fn most_solid_angle(from: &crate::hierarchy::Node, to: &crate::hierarchy::Node) -> f64 {
-    let mut w = crate::geometry::solid_angle(from.centroid, &to.corners);
-    for c in from.corners {
-        w = w.max(crate::geometry::solid_angle(c, &to.corners));
-    }
-    w
+    let [a, b, c] = from.corners;
+    let points = crate::geometry::lanes_of(&[a, b, c, from.centroid]);
+    let w = crate::geometry::solid_angle_lanes(&points, &to.corners);
+    w.to_array().into_iter().fold(0.0, f64::max)
 }
 
 /// True when nothing can travel from S to R: S lies entirely in or behind the plane of every

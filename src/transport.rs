@@ -188,16 +188,11 @@ fn spread_part(
             return;
         }
     }
-    for piece in geometry::subdivide(part, m) {
-        let w = if m == 1 {
-            omega
-        } else {
-            geometry::solid_angle(x, &piece)
-        };
+    let mut add_piece = |piece: &Tri, w: f64| {
         if !(w > 0.0) {
-            continue;
+            return;
         }
-        let to_piece = geometry::centroid(&piece) - x;
+        let to_piece = geometry::centroid(piece) - x;
         // Only each bin's share of the part's form factor is used ([`Spread`]): a piece is
         // small against a bin, so its projected solid angle is its solid angle times the
         // cosine towards its centroid, to second order in its size.
@@ -208,6 +203,17 @@ fn spread_part(
         };
         let bin = bins.bin_of(-to_piece) as u16;
         add_point_bin(acc, bin, f, w);
+    };
+    if m == 1 {
+        add_piece(part, omega);
+        return;
+    }
+    let pieces: SmallVec<[Tri; 64]> = geometry::subdivide(part, m).collect();
+    for group in pieces.chunks(geometry::LANES) {
+        let w = geometry::solid_angles_at(x, group).to_array();
+        for (piece, &w) in group.iter().zip(&w) {
+            add_piece(piece, w);
+        }
     }
 }
 
@@ -344,16 +350,11 @@ impl Receiver {
                 best as u8
             })
             .collect();
-        let to_lanes = |chunk: &[DVec3]| {
-            let point = |l: usize| chunk[l.min(chunk.len() - 1)];
-            [
-                geometry::Lanes::new(std::array::from_fn(|l| point(l).x)),
-                geometry::Lanes::new(std::array::from_fn(|l| point(l).y)),
-                geometry::Lanes::new(std::array::from_fn(|l| point(l).z)),
-            ]
-        };
-        let lanes = points.chunks(geometry::LANES).map(to_lanes).collect();
-        let spread_lanes = to_lanes(&spread_points);
+        let lanes = points
+            .chunks(geometry::LANES)
+            .map(geometry::lanes_of)
+            .collect();
+        let spread_lanes = geometry::lanes_of(&spread_points);
         Receiver {
             geom,
             q,
