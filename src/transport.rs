@@ -457,51 +457,100 @@ pub fn couple(
             front_seen.extend(f.to_array().into_iter().zip(w.to_array()));
         }
     }
-    let mut acc = PointBins::new();
-    for (k, &x) in points.iter().enumerate() {
-        // The sender's B reaches x only if x is in front of it; its antiradiance leaves through
-        // its back (front-only mode) or through either side (two-sided mode).
-        let facing = s.normal.dot(x - s.corners[0]) > 0.0;
-        let anti_leaves = params.two_sided || !facing;
-        let spread = if far {
-            &spreads[0]
-        } else {
-            &spreads[receiver.nearest[k] as usize]
-        };
-        acc.clear();
-        let (f_front, w_front) = front_seen[k];
-        for &(bin, f_frac, w_frac) in &spread.front {
-            add_point_bin(&mut acc, bin, f_front * f_frac, w_front * w_frac);
-        }
-        if params.two_sided {
+    let spread_of = |k: usize| if far { 0 } else { receiver.nearest[k] as usize };
+    // The sender's B reaches a receiver point only if the point is in front of it; its
+    // antiradiance leaves through its back (front-only mode) or through either side (two-sided).
+    let facing = |x: DVec3| s.normal.dot(x - s.corners[0]) > 0.0;
+    if params.two_sided {
+        // Per point: the front and back parts' shares of each bin.
+        let mut acc = PointBins::new();
+        for (k, &x) in points.iter().enumerate() {
+            let spread = &spreads[spread_of(k)];
+            acc.clear();
+            let (f_front, w_front) = front_seen[k];
+            for &(bin, f_frac, w_frac) in &spread.front {
+                add_point_bin(&mut acc, bin, f_front * f_frac, w_front * w_frac);
+            }
             let (_, w_back) = poly_ff_omega(x, r.normal, &back, false);
             for &(bin, _, w_frac) in &spread.back {
                 add_point_bin(&mut acc, bin, 0.0, w_back * w_frac);
             }
-        }
-        for &(bin, f, omega) in &acc {
-            let o = (omega / bins.solid_angle[bin as usize]).min(1.0);
-            let (f, o) = ((f * weight) as f32, (o * weight) as f32);
-            let entry = match out.iter_mut().find(|e| e.bin == bin) {
-                Some(e) => e,
-                None => {
-                    out.push(Entry {
-                        bin,
-                        ..Entry::default()
-                    });
-                    out.last_mut().expect("just pushed")
+            for &(bin, f, omega) in &acc {
+                let o = (omega / bins.solid_angle[bin as usize]).min(1.0);
+                let entry = entry_of(out, bin);
+                entry.f_a += (f * weight) as f32;
+                entry.o_a += (o * weight) as f32;
+                if facing(x) {
+                    entry.f_b += (f * weight) as f32;
+                    entry.o_b += (o * weight) as f32;
                 }
-            };
-            if anti_leaves {
-                entry.f_a += f;
-                entry.o_a += o;
             }
-            if facing {
-                entry.f_b += f;
-                entry.o_b += o;
+        }
+        return;
+    }
+    // Front-only: the points sharing a spreading point and a side of the sender differ only by
+    // their form factor and solid angle, so those are summed first; a bin's share of a point's
+    // solid angle is capped at the bin's, which the largest point shows whether it binds.
+    #[derive(Clone, Copy, Default)]
+    struct Side {
+        f: f64,
+        w: f64,
+        w_max: f64,
+        points: u32,
+    }
+    let mut sides = [[Side::default(); 2]; 4];
+    for (k, &x) in points.iter().enumerate() {
+        let side = &mut sides[spread_of(k)][usize::from(facing(x))];
+        let (f, w) = front_seen[k];
+        side.f += f;
+        side.w += w;
+        side.w_max = side.w_max.max(w);
+        side.points += 1;
+    }
+    for (g, spread) in spreads.iter().enumerate() {
+        for (in_front, side) in sides[g].iter().enumerate() {
+            if side.points == 0 {
+                continue;
+            }
+            for &(bin, f_frac, w_frac) in &spread.front {
+                let omega_bin = bins.solid_angle[bin as usize];
+                let o = if side.w_max * w_frac <= omega_bin {
+                    side.w * w_frac / omega_bin
+                } else {
+                    (0..points.len())
+                        .filter(|&k| {
+                            spread_of(k) == g && usize::from(facing(points[k])) == in_front
+                        })
+                        .map(|k| (front_seen[k].1 * w_frac / omega_bin).min(1.0))
+                        .sum()
+                };
+                let (f, o) = ((side.f * f_frac * weight) as f32, (o * weight) as f32);
+                let entry = entry_of(out, bin);
+                if in_front == 1 {
+                    entry.f_b += f;
+                    entry.o_b += o;
+                } else {
+                    entry.f_a += f;
+                    entry.o_a += o;
+                }
             }
         }
     }
+}
+
+/// The entry of `bin` in `out`, appended (zero) when missing.
+fn entry_of(out: &mut Coupling, bin: u16) -> &mut Entry {
+    let k = match out.iter().position(|e| e.bin == bin) {
+        Some(k) => k,
+        None => {
+            out.push(Entry {
+                bin,
+                ..Entry::default()
+            });
+            out.len() - 1
+        }
+    };
+    &mut out[k]
 }
 
 /// Applies one coupling to a receiver's accumulators: adds `f_b B_s - f_a A_s[bin]` to the
