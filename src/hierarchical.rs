@@ -669,13 +669,9 @@ impl SenderGroups {
         if tree.nodes.is_empty() {
             return groups;
         }
-        let maxe: u32 = std::env::var("AR_PULLMAX")
-            .ok()
-            .and_then(|s| s.parse().ok())
-            .unwrap_or(PULL_PER_ELEMENT_MAX);
         let large = |i: u32| {
             let (e0, e1) = tree.nodes[i as usize].elements;
-            e1 - e0 > maxe
+            e1 - e0 > PULL_PER_ELEMENT_MAX
         };
         // Post-order over the large nodes.
         let mut stack = vec![(0u32, false)];
