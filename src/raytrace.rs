@@ -1,4 +1,5 @@
-//! Visibility rays against the patches: an obvhs BVH2 over padded f32 boxes, with every
+//! Visibility rays against the patches: an obvhs compressed wide BVH (CWBVH, 8 children per
+//! node, at most 3 patches per leaf) over padded f32 boxes, with every
 //! ray-triangle test done by the watertight test of Woop, Benthin and Wald (2013) in f64 on the
 //! patch corners, so a ray through the shared edge or vertex of two triangles never slips
 //! between them. Shared by the reference path tracer and the exact direct light.
@@ -8,7 +9,7 @@
 
 use glam::DVec3;
 use obvhs::aabb::Aabb;
-use obvhs::bvh2::Bvh2;
+use obvhs::cwbvh::{builder::build_cwbvh, CwBvh};
 use obvhs::ray::{Ray, RayHit};
 use obvhs::{Boundable, BvhBuildParams};
 
@@ -158,7 +159,7 @@ pub struct Hit {
 pub struct RayScene<'a> {
     patches: &'a Patches,
     /// None when no patch is active.
-    bvh: Option<Bvh2>,
+    bvh: Option<CwBvh>,
     /// Patch index of each BVH primitive slot (already mapped through `primitive_indices`).
     slot_patch: Vec<u32>,
 }
@@ -179,11 +180,7 @@ impl<'a> RayScene<'a> {
                 .map(|&p| padded_box(&patches.corners[p as usize]))
                 .collect();
             let mut build_time = std::time::Duration::ZERO;
-            let bvh = obvhs::bvh2::builder::build_bvh2(
-                &boxes,
-                BvhBuildParams::medium_build(),
-                &mut build_time,
-            );
+            let bvh = build_cwbvh(&boxes, BvhBuildParams::medium_build(), &mut build_time);
             let slot_patch = bvh
                 .primitive_indices
                 .iter()

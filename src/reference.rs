@@ -14,7 +14,7 @@
 //! is absorbed; Russian roulette after depth 3 (once a path's throughput is below 0.1) keeps the
 //! estimator unbiased. Paths longer than `max_depth` segments are cut.
 //!
-//! Rays are traversed with an obvhs BVH2 built over padded f32 boxes, but every ray-triangle test is
+//! Rays are traversed with an obvhs wide BVH built over padded f32 boxes, but every ray-triangle test is
 //! ([`crate::raytrace`]) the watertight test of Woop, Benthin and Wald (2013) in f64 on the patch corners, so a ray through
 //! the shared edge or vertex of two triangles never slips between them. Each patch has its own
 //! random stream derived from the seed and the patch index: results are reproducible bit for bit
