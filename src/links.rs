@@ -221,7 +221,8 @@ fn culled(tree: &ClusterTree, s: u32, r: u32, two_sided: bool) -> bool {
 /// What the traversal found below some node pairs (one task's share, merged in pair order).
 #[derive(Default)]
 struct Found {
-    cluster: Vec<ClusterLink>,
+    /// Cluster links as `receiver << 32 | sender` (the links are made once sorted).
+    cluster: Vec<u64>,
     /// (sender, receiver) node pairs to couple element by element.
     exact: Vec<(u32, u32)>,
     /// Pairs that exchange nothing (kept only when `record_culled`).
@@ -266,7 +267,6 @@ impl Found {
 /// The fixed inputs of one traversal.
 struct Traversal<'a> {
     tree: &'a ClusterTree,
-    bins: &'a Bins,
     params: &'a LinkParams,
     coupling: &'a CouplingParams,
     record_culled: bool,
@@ -344,15 +344,7 @@ impl Traversal<'_> {
                     }
                     return;
                 }
-                let w = (rn.centroid - sn.centroid).normalize_or_zero();
-                found.cluster.push(ClusterLink {
-                    sender: s,
-                    receiver: r,
-                    w: [w.x as f32, w.y as f32, w.z as f32],
-                    origin: sn.centroid.as_vec3().to_array(),
-                    spread: (sn.area / std::f64::consts::PI).min(sn.radius * sn.radius) as f32,
-                    bin: self.bins.bin_of(w) as u16,
-                });
+                found.cluster.push(u64::from(r) << 32 | u64::from(s));
                 return;
             }
         }
@@ -420,6 +412,20 @@ fn split_pair(
     }
 }
 
+/// The cluster link from node `s` to node `r`.
+fn cluster_link(tree: &ClusterTree, bins: &Bins, s: u32, r: u32) -> ClusterLink {
+    let (sn, rn) = (&tree.nodes[s as usize], &tree.nodes[r as usize]);
+    let w = (rn.centroid - sn.centroid).normalize_or_zero();
+    ClusterLink {
+        sender: s,
+        receiver: r,
+        w: [w.x as f32, w.y as f32, w.z as f32],
+        origin: sn.centroid.as_vec3().to_array(),
+        spread: (sn.area / std::f64::consts::PI).min(sn.radius * sn.radius) as f32,
+        bin: bins.bin_of(w) as u16,
+    }
+}
+
 /// The gap between the bounding spheres of nodes `s` and `r` (negative when they overlap).
 fn sphere_gap(tree: &ClusterTree, s: u32, r: u32) -> f64 {
     let (sn, rn) = (&tree.nodes[s as usize], &tree.nodes[r as usize]);
@@ -451,7 +457,6 @@ pub fn refine(
     while !pairs.is_empty() {
         let traversal = Traversal {
             tree,
-            bins,
             params,
             coupling,
             record_culled,
@@ -527,11 +532,11 @@ pub fn refine(
     let t_traversed = std::time::Instant::now();
     stats.traverse_seconds = (t_traversed - t_start).as_secs_f64();
 
-    // Cluster links grouped by receiver node.
-    cluster.par_sort_unstable_by_key(|l| (l.receiver, l.sender));
+    // Cluster links grouped by receiver node: the 8-byte keys sorted, then the links made.
+    cluster.par_sort_unstable();
     let mut cluster_start = vec![0u32; tree.nodes.len() + 1];
-    for l in &cluster {
-        cluster_start[l.receiver as usize + 1] += 1;
+    for &key in &cluster {
+        cluster_start[(key >> 32) as usize + 1] += 1;
     }
     for i in 0..tree.nodes.len() {
         cluster_start[i + 1] += cluster_start[i];
@@ -608,6 +613,10 @@ pub fn refine(
     drop(exact_pairs);
     let t_coupled = std::time::Instant::now();
     stats.couple_seconds = (t_coupled - t_traversed).as_secs_f64();
+    let cluster: Vec<ClusterLink> = cluster
+        .into_par_iter()
+        .map(|key| cluster_link(tree, bins, key as u32, (key >> 32) as u32))
+        .collect();
     let mut links = Links {
         cluster,
         cluster_start,
