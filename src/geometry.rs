@@ -278,16 +278,14 @@ pub fn poly_form_factor_solid_angle_lanes(
     // lambert_form_factor, per lane.
     let f = (lambert * (0.5 / std::f64::consts::PI)).abs();
     let f = f.is_finite().select(f.min(Lanes::ONE), zero);
-    // Fan triangles (0, i, i + 1): Van Oosterom and Strackee, b x c being edge i's cross.
+    // Fan triangles (0, i, i + 1), b x c being edge i's cross.
     let mut omega = zero;
     for i in 1..n - 1 {
-        let (a, b, c) = (&r[0], &r[i], &r[i + 1]);
-        let (la, lb, lc) = (len[0], len[i], len[i + 1]);
-        let num = dot_lanes(a, &cross[i]).abs();
-        let den = la * lb * lc + dot_lanes(a, b) * lc + dot_lanes(a, c) * lb + dot_lanes(b, c) * la;
-        let w = atan2_upper_lanes(num, den) * 2.0;
-        let valid = la.simd_gt(zero) & lb.simd_gt(zero) & lc.simd_gt(zero) & w.is_finite();
-        omega += valid.select(w, zero);
+        omega += van_oosterom(
+            [&r[0], &r[i], &r[i + 1]],
+            [len[0], len[i], len[i + 1]],
+            &cross[i],
+        );
     }
     (f, omega)
 }
@@ -337,18 +335,28 @@ pub fn solid_angles_at(x: DVec3, tris: &[Tri]) -> Lanes {
     }))
 }
 
-/// Van Oosterom and Strackee's solid angle from the corner vectors (corner minus viewpoint).
+/// The solid angle of the triangle whose corner vectors (corner minus viewpoint) are `r`.
 #[inline(always)]
 fn solid_angle_of_corner_vectors(r: [[Lanes; 3]; 3]) -> Lanes {
-    let zero = Lanes::ZERO;
-    let [la, lb, lc] = r.map(|v| dot_lanes(&v, &v).sqrt());
     let [a, b, c] = &r;
     let b_cross_c = [
         b[1] * c[2] - b[2] * c[1],
         b[2] * c[0] - b[0] * c[2],
         b[0] * c[1] - b[1] * c[0],
     ];
-    let num = dot_lanes(a, &b_cross_c).abs();
+    van_oosterom([a, b, c], r.map(|v| dot_lanes(&v, &v).sqrt()), &b_cross_c)
+}
+
+/// Van Oosterom and Strackee's solid angle of the triangle with corner vectors `a, b, c`, given
+/// their lengths and `b x c`, as [`solid_angle`] computes it (0 when a corner is the viewpoint).
+#[inline(always)]
+fn van_oosterom(
+    [a, b, c]: [&[Lanes; 3]; 3],
+    [la, lb, lc]: [Lanes; 3],
+    b_cross_c: &[Lanes; 3],
+) -> Lanes {
+    let zero = Lanes::ZERO;
+    let num = dot_lanes(a, b_cross_c).abs();
     let den = la * lb * lc + dot_lanes(a, b) * lc + dot_lanes(a, c) * lb + dot_lanes(b, c) * la;
     let w = atan2_upper_lanes(num, den) * 2.0;
     let valid = la.simd_gt(zero) & lb.simd_gt(zero) & lc.simd_gt(zero) & w.is_finite();

@@ -146,8 +146,9 @@ fn add_point_bin(acc: &mut PointBins, bin: u16, f: f64, omega: f64) {
 }
 
 /// Spreads one sender part (a triangle clipped to one side of the receiver's plane) of solid
-/// angle `omega` seen from `x` over the bins it covers, splitting it into pieces of at most `piece_fraction` of the smallest
-/// bin's solid angle (at most 8 x 8 pieces). `with_ff`: also accumulate the form factor.
+/// angle `omega` seen from `x` over the bins it covers, splitting it into pieces of at most
+/// `piece_fraction` of the smallest bin's solid angle (at most 8 x 8 pieces). `with_ff`: also
+/// accumulate each bin's share of the form factor.
 fn spread_part(
     x: DVec3,
     n_x: DVec3,
