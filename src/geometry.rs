@@ -209,8 +209,8 @@ pub const LANES: usize = 4;
 pub type Lanes = wide::f64x4;
 
 /// [`atan2_upper`] of `LANES` argument pairs, vectorized: one division folds Cephes' range
-/// reduction, `(lo - hi) / (lo + hi)` standing for `(t - 1) / (t + 1)`. 0 where `y = x = 0`.
-/// Same accuracy as [`atan2_upper`].
+/// reduction, `(lo - hi) / (lo + hi)` standing for `(t - 1) / (t + 1)`. 0 where `y = x = 0`
+/// (libm gives pi for `x = -0`; no caller passes it). Same accuracy as [`atan2_upper`].
 #[inline(always)]
 fn atan2_upper_lanes(y: Lanes, x: Lanes) -> Lanes {
     let zero = Lanes::ZERO;
@@ -270,7 +270,9 @@ pub fn poly_form_factor_solid_angle_lanes(
         let cross_len = dot_lanes(&c, &c).sqrt();
         let angle = atan2_upper_lanes(cross_len, dot_lanes(a, b));
         let projected = c[0] * n_x.x + c[1] * n_x.y + c[2] * n_x.z;
-        let positive = cross_len.simd_gt(zero);
+        // Not "> 0": a NaN edge makes the whole sum NaN and the form factor 0, as in
+        // `lambert_edge` and `lambert_form_factor`.
+        let positive = cross_len.simd_ne(zero);
         let term = angle * projected / positive.select(cross_len, Lanes::ONE);
         lambert += positive.select(term, zero);
         cross[i] = c;
@@ -576,6 +578,20 @@ mod tests {
             }
         }
         assert!(worst < 1e-13, "{worst}");
+        // A corner that is not a number gives a form factor of 0 in both, not a partial sum.
+        let poly = Poly {
+            v: [
+                DVec3::new(0.0, 0.0, 1.0),
+                DVec3::new(1.0, 0.0, 1.0),
+                DVec3::new(f64::NAN, 1.0, 1.0),
+                DVec3::ZERO,
+            ],
+            len: 3,
+        };
+        let n = DVec3::new(0.3, 0.4, 1.0).normalize();
+        let (f, _) = poly_form_factor_solid_angle_lanes(&lanes_of(&[DVec3::ZERO]), n, &poly);
+        let (f1, _) = poly_form_factor_solid_angle(DVec3::ZERO, n, &poly);
+        assert_eq!((f.to_array()[0], f1), (0.0, 0.0));
     }
 
     #[test]

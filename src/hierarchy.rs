@@ -288,7 +288,7 @@ impl ClusterTree {
         // n_t . y - d_t = n_t . (c_s - c_r) + n_t . (y - c_s) + (n_t . c_r - d_t)
         //              <= max over the cone of n . D   +   r_s   +   height(r).
         let dv = center - rn.center;
-        // The cone's axis is one of its normals, so the bound is at least axis . D: most pairs
+        // The cone's axis lies in the cone, so the bound is at least axis . D: most pairs
         // are decided by that alone, without a square root.
         let axis_dot = rn.cone_axis.dot(dv);
         if axis_dot + radius + rn.height > tol {
