@@ -638,8 +638,6 @@ const SAME_NORMAL: f64 = 1e-9;
 struct SenderGroups {
     /// Per node, its groups `range.0..range.1` (empty for small nodes).
     range: Vec<(u32, u32)>,
-    /// Per node, its elements (a compact copy of the tree's ranges: small nodes pull from them).
-    elements: Vec<(u32, u32)>,
     /// Per group, the area-weighted mean normal (unit for exact groups, shorter for cells).
     normal: Vec<DVec3>,
     /// Per group, its area.
@@ -665,7 +663,6 @@ impl SenderGroups {
     fn build(tree: &ClusterTree, elem_area: &[f64], elem_normal: &[DVec3]) -> SenderGroups {
         let mut groups = SenderGroups {
             range: vec![(0, 0); tree.nodes.len()],
-            elements: tree.nodes.iter().map(|n| n.elements).collect(),
             elem_group: vec![NONE; elem_area.len()],
             ..SenderGroups::default()
         };
@@ -798,9 +795,9 @@ impl SenderGroups {
         g1 > g0
     }
 
-    /// Bytes of the groups, their per-sweep sums and the nodes' element ranges.
+    /// Bytes of the per-sweep group sums.
     fn bytes(&self, bins: u64) -> u64 {
-        self.normal.len() as u64 * (24 + 8 + 4 + 24 * (1 + bins)) + self.elements.len() as u64 * 8
+        self.normal.len() as u64 * (24 + 8 + 4 + 24 * (1 + bins))
     }
 
     /// Area-weighted sums of B (`group_b`) and of every antiradiance bin (`group_a`) per group:
@@ -977,7 +974,7 @@ impl SweepContext<'_> {
                 );
             }
         } else {
-            let (e0, e1) = groups.elements[l.sender as usize];
+            let (e0, e1) = self.tree.nodes[l.sender as usize].elements;
             for e in e0 as usize..e1 as usize {
                 let a = self.elem_area[e];
                 let a_e = self

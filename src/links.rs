@@ -235,9 +235,9 @@ struct Found {
 impl Found {
     /// The pieces' findings in order, each array concatenated once (into exact capacity),
     /// freeing each piece's array as soon as it is copied (so the peak is the result plus one
-    /// piece, not twice the result: 52M cluster-link keys at 1M triangles are 0.4 GB). Their deferred
-    /// pairs must have been taken (they are between rounds); the exact-pair counts are made
-    /// from the final pairs.
+    /// piece, not twice the result: 52M cluster-link keys at 1M triangles are 0.4 GB). Their
+    /// deferred pairs must have been taken (they are between rounds); the exact-pair counts are
+    /// made from the final pairs.
     fn concat(mut pieces: Vec<Found>) -> Found {
         fn gather<T: Copy>(
             pieces: &mut [Found],
