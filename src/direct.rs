@@ -42,7 +42,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::dense;
-use crate::geometry::{self, PLANE_EPS};
+use crate::geometry::{self, plane_tol, PLANE_EPS};
 use crate::hierarchical::{Element, Prepared};
 use crate::mesh::Patches;
 use crate::progress::Progress;
@@ -612,7 +612,7 @@ impl<'a> DirectLight<'a> {
     /// behind the receiver's plane, or the receiver wholly behind the group's (one-sided
     /// emitters). A cheap, conservative test (bounding sphere, plane margins).
     fn cannot_reach(&self, r: &Element, receiver: &PatchGeom, group: &EmitterGroup) -> bool {
-        let tol = PLANE_EPS * receiver.size.max(2.0 * group.radius);
+        let tol = plane_tol(receiver.size.max(2.0 * group.radius));
         if r.normal.dot(group.center - r.corners[0]) <= tol - group.radius {
             return true;
         }
@@ -633,7 +633,7 @@ impl<'a> DirectLight<'a> {
         receiver: &PatchGeom,
         group: &EmitterGroup,
     ) -> bool {
-        let tol = PLANE_EPS * receiver.size.max(2.0 * group.radius);
+        let tol = plane_tol(receiver.size.max(2.0 * group.radius));
         let height = |p: DVec3| r.normal.dot(p - r.corners[0]);
         height(group.center) >= group.radius || group.vertices.iter().all(|&v| height(v) >= -tol)
     }
@@ -730,7 +730,7 @@ impl<'a> DirectLight<'a> {
         for &k in &group.members {
             let s = &self.emitters.geom[k as usize];
             // The sides as `emitter_form_factor`'s clipping sees them.
-            let tol = PLANE_EPS * receiver.size.max(s.size);
+            let tol = plane_tol(receiver.size.max(s.size));
             let height = geometry::plane_heights(&s.corners, r.corners[0], r.normal, tol);
             let in_front = height.iter().all(|&h| h >= 0.0)
                 && height.iter().any(|&h| h > 0.0)
@@ -756,7 +756,7 @@ impl<'a> DirectLight<'a> {
             return 0.0;
         }
         // A receiver wholly behind (or in) the emitter's plane sees none of its front.
-        let tol = PLANE_EPS * receiver.size.max(s.size);
+        let tol = plane_tol(receiver.size.max(s.size));
         if r.corners
             .iter()
             .all(|&c| s.normal.dot(c - s.corners[0]) <= tol)

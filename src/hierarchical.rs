@@ -29,7 +29,7 @@ use crate::transport::gather_entries;
 /// Time spent in each stage of a hierarchical solve, seconds.
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct HierarchyTimings {
-    /// Cluster tree (obvhs BVH2 and our arrays).
+    /// Cluster tree (median splits and our arrays).
     pub tree: f64,
     /// Link refinement including exact couplings.
     pub links: f64,

@@ -19,7 +19,7 @@ use glam::DVec3;
 use smallvec::SmallVec;
 
 use crate::bins::Bins;
-use crate::geometry::{self, Poly, Tri, PLANE_EPS};
+use crate::geometry::{self, plane_tol, Poly, Tri};
 
 /// One bin's share of a sender -> receiver coupling.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -298,7 +298,7 @@ fn poly_ff_omega(x: DVec3, n_x: DVec3, poly: &Poly, with_ff: bool) -> (f64, f64)
 /// plane (or behind it, in two-sided mode). Exactly the pairs whose coupling [`couple`] does not
 /// skip at once; the receiver's quadrature rule is chosen among them ([`Receiver::for_senders`]).
 pub fn exchanges(r: &PatchGeom, s: &PatchGeom, params: &CouplingParams) -> bool {
-    let tol = PLANE_EPS * r.size.max(s.size);
+    let tol = plane_tol(r.size.max(s.size));
     let (front, back) = geometry::clip_by_plane(&s.corners, r.corners[0], r.normal, tol);
     front.len > 0 || (back.len > 0 && params.two_sided)
 }
@@ -424,7 +424,7 @@ pub fn couple(
 ) {
     out.clear();
     let r = &receiver.geom;
-    let tol = PLANE_EPS * r.size.max(s.size);
+    let tol = plane_tol(r.size.max(s.size));
     let (front, back) = geometry::clip_by_plane(&s.corners, r.corners[0], r.normal, tol);
     if front.len == 0 && (back.len == 0 || !params.two_sided) {
         return;
