@@ -28,8 +28,13 @@ pub fn solve_dense(patches: &Patches, options: &SolverOptions, progress: &Progre
     let nb = bins.len();
     let n = patches.len();
     let params = options.coupling();
+    let back = crate::model::back_blocking(patches, options);
     let geoms: Vec<Option<PatchGeom>> = (0..n)
-        .map(|p| patches.active[p].then(|| PatchGeom::new(patches.corners[p], patches.normal[p])))
+        .map(|p| {
+            patches.active[p].then(|| {
+                PatchGeom::new(patches.corners[p], patches.normal[p]).blocking_back(back[p])
+            })
+        })
         .collect();
     let active: Vec<usize> = (0..n).filter(|&p| patches.active[p]).collect();
 
@@ -107,7 +112,7 @@ pub fn solve_dense(patches: &Patches, options: &SolverOptions, progress: &Progre
                         radiance[s],
                         |bin| anti[s * nb + bin].map(f64::from),
                         options.antiradiance,
-                        params.two_sided,
+                        params.two_sided || back[s],
                         &mut h,
                         &mut a_acc,
                     );

@@ -174,10 +174,14 @@ pub struct SolverArgs {
     /// nearby object needs a finer receiver (0 keeps the input mesh; default 4).
     #[arg(long, value_name = "D")]
     pub split_depth: Option<u8>,
-    /// Create antiradiance from light arriving at both sides of a surface (open scenes with
-    /// back-lit one-sided surfaces); by default only the front side creates it.
-    #[arg(long)]
+    /// Create antiradiance from light arriving at both sides of every surface; by default the
+    /// front of every surface creates it, and the back of those whose back is exposed to light.
+    #[arg(long, conflicts_with = "front_only_antiradiance")]
     pub two_sided_antiradiance: bool,
+    /// Create antiradiance only from light arriving at a surface's front, everywhere (exact for
+    /// closed, consistently oriented objects; back-lit surfaces then leak).
+    #[arg(long)]
+    pub front_only_antiradiance: bool,
     /// Switch antiradiance off (unoccluded radiosity: light goes through walls).
     #[arg(long)]
     pub no_antiradiance: bool,
@@ -214,6 +218,7 @@ impl SolverArgs {
             options.max_iterations = n;
         }
         options.two_sided = self.two_sided_antiradiance;
+        options.block_exposed_backs = !self.front_only_antiradiance;
         options.antiradiance = !self.no_antiradiance;
         options.clamp_negative = !self.keep_negative;
         if self.direct_light {

@@ -56,6 +56,10 @@ pub struct Prepared {
     elem_center: Vec<DVec3>,
     elem_albedo: Vec<[f64; 3]>,
     elem_patch: Vec<u32>,
+    /// Per element: it blocks light arriving at its back (two-sided coupling).
+    elem_back: Vec<bool>,
+    /// Input patches that block light arriving at their back.
+    back_blocking_patches: u64,
     /// Normal groups of the large nodes, for the pull.
     groups: SenderGroups,
     /// The antiradiance bins each element stores.
@@ -145,6 +149,8 @@ impl Prepared {
         let bins = Bins::new(options.bins);
         let t0 = Instant::now();
         let mut tree = ClusterTree::build(patches);
+        let back_blocking = model::back_blocking(patches, options);
+        tree.mark_back_blocking(&back_blocking);
         let t1 = Instant::now();
         let links = links::refine(
             &mut tree,
@@ -161,6 +167,8 @@ impl Prepared {
             elem_center: Vec::with_capacity(tree.elements.len()),
             elem_albedo: Vec::with_capacity(tree.elements.len()),
             elem_patch: Vec::with_capacity(tree.elements.len()),
+            elem_back: Vec::with_capacity(tree.elements.len()),
+            back_blocking_patches: back_blocking.iter().filter(|&&b| b).count() as u64,
             groups: SenderGroups::default(),
             live: LiveBins::default(),
             pairs: None,
@@ -188,9 +196,14 @@ impl Prepared {
             prepared.elem_center.push(n.centroid);
             prepared.elem_albedo.push(patches.albedo[n.patch as usize]);
             prepared.elem_patch.push(n.patch);
+            prepared.elem_back.push(n.blocks_back);
         }
-        prepared.groups =
-            SenderGroups::build(&prepared.tree, &prepared.elem_area, &prepared.elem_normal);
+        prepared.groups = SenderGroups::build(
+            &prepared.tree,
+            &prepared.elem_area,
+            &prepared.elem_normal,
+            &prepared.elem_back,
+        );
         // Model only what the scene needs: grey albedos allow one-channel solves; a convex
         // enclosure needs no antiradiance; each element stores only the bins links use.
         prepared.albedo_grey = prepared.elem_albedo.iter().all(|&a| model::is_grey(a));
@@ -310,6 +323,7 @@ impl Prepared {
             elem_area: &self.elem_area,
             elem_normal: &self.elem_normal,
             elem_center: &self.elem_center,
+            elem_back: &self.elem_back,
             use_anti: self.use_anti,
             two_sided: self.options.two_sided,
         }
@@ -334,6 +348,7 @@ impl Prepared {
         let nb = self.bins.len();
         let n = self.element_count();
         let two_sided = options.two_sided;
+        let elem_back = &self.elem_back;
         let use_anti = self.use_anti;
         let live = &self.live;
         let slots = live.slots();
@@ -355,6 +370,7 @@ impl Prepared {
                 channels: C,
                 antiradiance: use_anti,
                 convex_enclosure: self.convex,
+                back_blocking_patches: self.back_blocking_patches,
                 anti_bins_stored: slots as u64,
                 anti_bins_full: (n * nb) as u64,
                 bytes_saved: full_bytes.saturating_sub(used_bytes),
@@ -446,7 +462,7 @@ impl Prepared {
                                         .map_or([0.0; C], |k| anti[k].map(f64::from))
                                 },
                                 use_anti,
-                                two_sided,
+                                two_sided || elem_back[s],
                                 &mut h,
                                 a_acc,
                             );
@@ -642,6 +658,8 @@ struct SenderGroups {
     normal: Vec<DVec3>,
     /// Per group, its area.
     area: Vec<f64>,
+    /// Per group: its elements block light at their back (groups never mix the two kinds).
+    both: Vec<bool>,
     /// Per group, the group of the parent node it adds into ([`NONE`] at the root).
     parent_group: Vec<u32>,
     /// Per element, the group of its lowest large ancestor it adds into ([`NONE`] if none).
@@ -660,7 +678,12 @@ enum GroupInput {
 
 impl SenderGroups {
     /// Builds the groups of every large node of a finalized tree.
-    fn build(tree: &ClusterTree, elem_area: &[f64], elem_normal: &[DVec3]) -> SenderGroups {
+    fn build(
+        tree: &ClusterTree,
+        elem_area: &[f64],
+        elem_normal: &[DVec3],
+        elem_back: &[bool],
+    ) -> SenderGroups {
         let mut groups = SenderGroups {
             range: vec![(0, 0); tree.nodes.len()],
             elem_group: vec![NONE; elem_area.len()],
@@ -695,36 +718,42 @@ impl SenderGroups {
             // Inputs: the groups of large children, the elements of small ones.
             let node = &tree.nodes[i as usize];
             let mut inputs: Vec<(GroupInput, DVec3, f64)> = Vec::new();
+            let mut input_back: Vec<bool> = Vec::new();
             for c in node.first_child..node.first_child + node.child_count as u32 {
                 if large(c) {
                     let (g0, g1) = groups.range[c as usize];
                     for g in g0..g1 {
                         let (n, a) = (groups.normal[g as usize], groups.area[g as usize]);
                         inputs.push((GroupInput::Group(g), n, a));
+                        input_back.push(groups.both[g as usize]);
                     }
                 } else {
                     let (e0, e1) = tree.nodes[c as usize].elements;
                     for e in e0..e1 {
                         let (n, a) = (elem_normal[e as usize], elem_area[e as usize]);
                         inputs.push((GroupInput::Element(e), n, a));
+                        input_back.push(elem_back[e as usize]);
                     }
                 }
             }
             // Exact groups when every input has a unit normal and there are few distinct ones;
             // else cells of a coarse direction grid.
-            let mut distinct: Vec<DVec3> = Vec::new();
+            let mut distinct: Vec<(DVec3, bool)> = Vec::new();
             let mut key_of: Vec<usize> = Vec::with_capacity(inputs.len());
             let mut exact = true;
-            for (_, n, _) in &inputs {
+            for ((_, n, _), &back) in inputs.iter().zip(&input_back) {
                 if (n.length_squared() - 1.0).abs() > 1e-9 {
                     exact = false;
                     break;
                 }
-                match distinct.iter().position(|d| 1.0 - d.dot(*n) <= SAME_NORMAL) {
+                match distinct
+                    .iter()
+                    .position(|(d, b)| *b == back && 1.0 - d.dot(*n) <= SAME_NORMAL)
+                {
                     Some(k) => key_of.push(k),
                     None if distinct.len() < MAX_EXACT_GROUPS => {
                         key_of.push(distinct.len());
-                        distinct.push(*n);
+                        distinct.push((*n, back));
                     }
                     None => {
                         exact = false;
@@ -732,24 +761,28 @@ impl SenderGroups {
                     }
                 }
             }
+            let mut group_back: Vec<bool> = distinct.iter().map(|&(_, b)| b).collect();
             let count = if exact {
                 distinct.len()
             } else {
                 key_of.clear();
-                let mut cell_keys: Vec<usize> = Vec::new();
-                for (_, n, _) in &inputs {
-                    let cell = cells.bin_of(*n);
+                group_back.clear();
+                let mut cell_keys: Vec<(usize, bool)> = Vec::new();
+                for ((_, n, _), &back) in inputs.iter().zip(&input_back) {
+                    let cell = (cells.bin_of(*n), back);
                     let k = cell_keys
                         .iter()
                         .position(|&c| c == cell)
                         .unwrap_or_else(|| {
                             cell_keys.push(cell);
+                            group_back.push(back);
                             cell_keys.len() - 1
                         });
                     key_of.push(k);
                 }
                 cell_keys.len()
             };
+            groups.both.extend_from_slice(&group_back);
             let first = groups.normal.len() as u32;
             groups.range[i as usize] = (first, first + count as u32);
             groups
@@ -880,6 +913,7 @@ struct SweepContext<'a> {
     elem_area: &'a [f64],
     elem_normal: &'a [DVec3],
     elem_center: &'a [DVec3],
+    elem_back: &'a [bool],
     use_anti: bool,
     two_sided: bool,
 }
@@ -895,12 +929,13 @@ impl SweepContext<'_> {
         mut f: impl FnMut(usize, &ClusterLink, PairFactor),
     ) {
         let (n_e, x_e) = (self.elem_normal[e], self.elem_center[e]);
+        let back = self.two_sided || self.elem_back[e];
         let mut node = self.tree.elements[e];
         while node != NONE {
             let range = links.cluster_start[node as usize] as usize
                 ..links.cluster_start[node as usize + 1] as usize;
             for (i, l) in range.clone().zip(&links.cluster[range]) {
-                f(i, l, self.pair_factor(l, n_e, x_e));
+                f(i, l, self.pair_factor(l, n_e, x_e, back));
             }
             node = self.tree.nodes[node as usize].parent;
         }
@@ -909,9 +944,10 @@ impl SweepContext<'_> {
     /// What a cluster link gives an element with normal `n_e` at `x_e`: irradiance
     /// `max(0, cos) / (pi (d^2 + spread))` per unit of the link's intensity, with the element's
     /// own direction and distance from the sender, and antiradiance `1 / ((d^2 + spread)
-    /// Omega_bin)` in the link's bin where the light arrives at a side that creates it.
+    /// Omega_bin)` in the link's bin where the light arrives at a side that creates it (the
+    /// front, and the back too when `back`).
     #[inline]
-    fn pair_factor(&self, l: &ClusterLink, n_e: DVec3, x_e: DVec3) -> PairFactor {
+    fn pair_factor(&self, l: &ClusterLink, n_e: DVec3, x_e: DVec3, back: bool) -> PairFactor {
         let origin = DVec3::new(l.origin[0] as f64, l.origin[1] as f64, l.origin[2] as f64);
         let v = x_e - origin;
         let d2 = v.length_squared();
@@ -925,7 +961,7 @@ impl SweepContext<'_> {
         } else {
             0.0
         };
-        let anti = if self.use_anti && (cos > 0.0 || self.two_sided) {
+        let anti = if self.use_anti && (cos > 0.0 || back) {
             g / self.bins.solid_angle[l.bin as usize]
         } else {
             0.0
@@ -951,13 +987,13 @@ impl SweepContext<'_> {
         let w = DVec3::new(l.w[0] as f64, l.w[1] as f64, l.w[2] as f64);
         let bin = l.bin as usize;
         let mut acc = [0.0f64; C];
-        let mut add = |cos: f64, b: [f64; C], a: [f64; C]| {
+        let mut add = |cos: f64, b: [f64; C], a: [f64; C], both: bool| {
             if cos > 0.0 {
                 for c in 0..C {
                     acc[c] += cos * b[c];
                 }
             }
-            if self.use_anti && (self.two_sided || cos < 0.0) {
+            if self.use_anti && (self.two_sided || both || cos < 0.0) {
                 let k = cos.abs();
                 for c in 0..C {
                     acc[c] -= k * a[c];
@@ -971,6 +1007,7 @@ impl SweepContext<'_> {
                     groups.normal[g].dot(w),
                     group_b[g],
                     group_a[bin * groups.normal.len() + g],
+                    groups.both[g],
                 );
             }
         } else {
@@ -981,7 +1018,12 @@ impl SweepContext<'_> {
                     .live
                     .slot(e, bin)
                     .map_or([0.0; C], |k| anti[k].map(|x| a * x as f64));
-                add(self.elem_normal[e].dot(w), radiance[e].map(|x| a * x), a_e);
+                add(
+                    self.elem_normal[e].dot(w),
+                    radiance[e].map(|x| a * x),
+                    a_e,
+                    self.elem_back[e],
+                );
             }
         }
         acc

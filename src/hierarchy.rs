@@ -55,6 +55,8 @@ pub struct Node {
     /// Cosine of the cone's half-angle: every normal below `n` has `n . cone_axis >= cone_cos`
     /// (-1: no bound).
     pub cone_cos: f64,
+    /// Some triangle below blocks light arriving at its back ([`ClusterTree::mark_back_blocking`]).
+    pub blocks_back: bool,
     /// Largest height of `center` above the plane of any triangle below,
     /// `max_t (n_t . center - n_t . v_t)`: with the cone it bounds from above the height of any
     /// point above every triangle's plane (see [`ClusterTree::behind_all`]).
@@ -112,6 +114,7 @@ fn leaf_node(corners: Tri, patch: u32, parent: u32, split_depth: u8) -> Node {
         elements: (0, 0),
         cone_axis: normal,
         cone_cos: 1.0,
+        blocks_back: false,
         height: 0.0,
     }
 }
@@ -530,14 +533,43 @@ impl ClusterTree {
         let node = &self.nodes[i as usize];
         debug_assert!(node.is_leaf());
         let (patch, depth, corners) = (node.patch, node.split_depth, node.corners);
+        let blocks_back = node.blocks_back;
         let first = self.nodes.len() as u32;
         for piece in geometry::bisect(&corners) {
-            self.nodes.push(leaf_node(piece, patch, i, depth + 1));
+            let mut leaf = leaf_node(piece, patch, i, depth + 1);
+            leaf.blocks_back = blocks_back;
+            self.nodes.push(leaf);
         }
         let node = &mut self.nodes[i as usize];
         node.first_child = first;
         node.child_count = 2;
         first
+    }
+
+    /// Marks the leaves of patches with `per_patch[p]` as blocking light at their back, and
+    /// every ancestor of such a leaf. Call before refinement (pieces split later inherit it).
+    ///
+    /// # Panics
+    /// When `per_patch` is shorter than a leaf's patch index.
+    pub fn mark_back_blocking(&mut self, per_patch: &[bool]) {
+        for n in &mut self.nodes {
+            n.blocks_back = false;
+        }
+        for i in 0..self.nodes.len() {
+            let n = &self.nodes[i];
+            if !n.is_leaf() || !per_patch[n.patch as usize] {
+                continue;
+            }
+            // Up to the first ancestor already marked (its own ancestors are).
+            let mut a = i as u32;
+            loop {
+                self.nodes[a as usize].blocks_back = true;
+                a = self.nodes[a as usize].parent;
+                if a == NONE || self.nodes[a as usize].blocks_back {
+                    break;
+                }
+            }
+        }
     }
 
     /// Numbers the leaves in depth-first order and sets every node's element range.

@@ -304,7 +304,12 @@ impl Traversal<'_> {
             }
             return;
         }
-        if culled(tree, s, r, coupling.two_sided) {
+        if culled(
+            tree,
+            s,
+            r,
+            coupling.two_sided || tree.nodes[r as usize].blocks_back,
+        ) {
             found.stats.culled_pairs += 1;
             if self.record_culled {
                 found.culled.push((s, r));
@@ -334,6 +339,7 @@ impl Traversal<'_> {
                 // arrives at their back: a link whose sender centroid lies behind every plane
                 // below the receiver adds exactly nothing. Such links are dropped (as culled).
                 if !coupling.two_sided
+                    && !rn.blocks_back
                     && tree.point_behind_all(
                         sn.centroid,
                         r,
@@ -565,6 +571,7 @@ pub fn refine(
         .map(|&node| {
             let n = &tree.nodes[node as usize];
             PatchGeom::new(n.corners, n.plane.map(|p| p.0).unwrap_or(glam::DVec3::Z))
+                .blocking_back(n.blocks_back)
         })
         .collect();
     // Receivers' ranges in `exact_pairs`.

@@ -17,6 +17,9 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::hierarchy::ClusterTree;
+use crate::mesh::Patches;
+use crate::raytrace::RayScene;
+use crate::sampling::{cosine_direction, point_on_triangle, Rng};
 
 /// What the hierarchical solver modelled for one solve, and what it saved.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
@@ -27,6 +30,9 @@ pub struct ModelStats {
     pub antiradiance: bool,
     /// True when the scene is a convex enclosure: all elements see each other unoccluded.
     pub convex_enclosure: bool,
+    /// Input patches whose back is exposed to light and blocks it ([`exposed_backs`]; all of
+    /// them with `two_sided`, none with `block_exposed_backs` off).
+    pub back_blocking_patches: u64,
     /// Antiradiance values stored per sweep state: (element, bin) slots that some link both
     /// writes and reads.
     pub anti_bins_stored: u64,
@@ -35,6 +41,76 @@ pub struct ModelStats {
     /// Bytes of per-sweep state (two copies of radiance and antiradiance) saved against three
     /// channels and every bin.
     pub bytes_saved: u64,
+}
+
+/// Shadow-ray budget of [`exposed_backs`]: rays per patch are this over the patch count,
+/// between [`BACK_RAYS_MIN`] and [`BACK_RAYS_MAX`].
+pub const BACK_RAY_BUDGET: usize = 2_000_000;
+/// Fewest rays per patch of [`exposed_backs`].
+pub const BACK_RAYS_MIN: usize = 4;
+/// Most rays per patch of [`exposed_backs`].
+pub const BACK_RAYS_MAX: usize = 16;
+/// Share of a patch's back rays meeting a surface that must meet a front for its back to
+/// count as exposed.
+pub const EXPOSED_SHARE: f64 = 0.25;
+
+/// Per patch: true when light can reach its back, so that it must block light arriving there
+/// (antiradiance from its back as well as its front).
+///
+/// Front-only antiradiance is exact for closed, consistently oriented objects: light reaching
+/// a back has passed through a front first, whose antiradiance cancels it. Files as found are
+/// not like that: walls exported facing away from the room, open sheets (a seat, a table top
+/// of one polygon), blinds. Their backs are lit directly, and without blocking there light
+/// leaks through them. The test is geometric, so it needs no consistent topology: from
+/// stratified points on the patch, cosine-distributed rays into its back hemisphere (from
+/// `2 SCENE_EPS` in front of it, so that a coincident back-to-back twin is met by its back);
+/// the back is exposed when at least [`EXPOSED_SHARE`] of those that meet a surface first meet
+/// the front of another (they see open space that light crosses), not when they meet backs
+/// (the inside of a closed object, or a twin) or all leave the scene (the outside of a room
+/// shell). A box standing open-bottomed on a floor is exposed inside (its inner faces see the
+/// floor's front): a false positive that costs two-sided bins, not light.
+pub fn exposed_backs(patches: &Patches) -> Vec<bool> {
+    let scene = RayScene::new(patches);
+    let active = patches.active_count().max(1);
+    let rays = (BACK_RAY_BUDGET / active).clamp(BACK_RAYS_MIN, BACK_RAYS_MAX);
+    let side = (rays as f64).sqrt().ceil() as usize;
+    (0..patches.len())
+        .into_par_iter()
+        .map(|p| {
+            if !patches.active[p] {
+                return false;
+            }
+            let (tri, n) = (&patches.corners[p], patches.normal[p]);
+            let mut rng = Rng::new(0x6261_636b, p as u64);
+            let (mut fronts, mut hits) = (0usize, 0usize);
+            for k in 0..rays {
+                // Stratified over the triangle (a side x side grid of its unit square).
+                let (i, j) = ((k % side) as f64, (k / side % side) as f64);
+                let u1 = (i + rng.next_f64()) / side as f64;
+                let u2 = (j + rng.next_f64()) / side as f64;
+                let org = point_on_triangle(tri, u1, u2) + n * (2.0 * crate::geometry::SCENE_EPS);
+                let dir = cosine_direction(-n, rng.next_f64(), rng.next_f64());
+                if let Some(hit) = scene.closest(org, dir, p) {
+                    hits += 1;
+                    if patches.normal[hit.patch].dot(dir) < 0.0 {
+                        fronts += 1;
+                    }
+                }
+            }
+            fronts > 0 && fronts as f64 >= EXPOSED_SHARE * hits as f64
+        })
+        .collect()
+}
+
+/// Per patch: it blocks light arriving at its back. [`exposed_backs`] when
+/// `options.block_exposed_backs` (and antiradiance is on), every patch when `options.two_sided`,
+/// none otherwise. Shared by both solvers.
+pub fn back_blocking(patches: &Patches, options: &crate::solve::SolverOptions) -> Vec<bool> {
+    if options.two_sided || !options.antiradiance || !options.block_exposed_backs {
+        vec![options.two_sided; patches.len()]
+    } else {
+        exposed_backs(patches)
+    }
 }
 
 /// Tolerance of the convexity test, unit frame (scene diameter 1): a vertex this far behind a

@@ -18,9 +18,15 @@ pub struct SolverOptions {
     pub tol: f64,
     /// Iteration cap; the report says when it was hit. Default 500.
     pub max_iterations: usize,
-    /// Antiradiance from both sides of every surface (open scenes with back-lit one-sided
-    /// surfaces). Default false: front-only, exact for closed, consistently oriented objects.
+    /// Antiradiance from both sides of every surface. Default false: each surface blocks on
+    /// the sides [`Self::block_exposed_backs`] decides.
     pub two_sided: bool,
+    /// Surfaces whose back is exposed to light ([`crate::model::exposed_backs`]: wrongly
+    /// oriented walls, open sheets) also create antiradiance from light arriving at their back,
+    /// so a one-sided surface lit from behind absorbs and casts a shadow. Default true; false
+    /// gives front-only antiradiance everywhere (exact for closed, consistently oriented
+    /// objects).
+    pub block_exposed_backs: bool,
     /// Propagate antiradiance at all. Off gives unoccluded radiosity (light through walls); only
     /// useful to show what antiradiance does.
     pub antiradiance: bool,
@@ -68,6 +74,7 @@ impl SolverOptions {
             tol: 1e-3,
             max_iterations: 500,
             two_sided: false,
+            block_exposed_backs: true,
             antiradiance: true,
             clamp_negative: true,
             near_quadrature: 4,

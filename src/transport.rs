@@ -78,9 +78,18 @@ pub struct PatchGeom {
     pub radius: f64,
     /// Area.
     pub area: f64,
+    /// The patch blocks light arriving at its back too: light reaching its back creates
+    /// antiradiance, and its antiradiance leaves through both sides (two-sided coupling).
+    pub blocks_back: bool,
 }
 
 impl PatchGeom {
+    /// The same geometry, blocking light at its back when `blocks_back`.
+    pub fn blocking_back(mut self, blocks_back: bool) -> PatchGeom {
+        self.blocks_back = blocks_back;
+        self
+    }
+
     /// Gathers the geometry of a triangle with a known unit normal.
     pub fn new(corners: Tri, normal: DVec3) -> PatchGeom {
         let centroid = geometry::centroid(&corners);
@@ -94,6 +103,7 @@ impl PatchGeom {
                 .map(|c| (*c - centroid).length())
                 .fold(0.0, f64::max),
             area: geometry::area(&corners),
+            blocks_back: false,
         }
     }
 }
@@ -240,6 +250,7 @@ impl Spread {
         n_x: DVec3,
         (front, front_omega): (&[Tri], [f64; 2]),
         back: &Poly,
+        receiver_back: bool,
         bins: &Bins,
         params: &CouplingParams,
     ) -> Spread {
@@ -250,7 +261,7 @@ impl Spread {
         for (part, &omega) in front.iter().zip(&front_omega) {
             spread_part(x, n_x, (part, omega), true, bins, params, &mut spread.front);
         }
-        if params.two_sided {
+        if receiver_back {
             for part in back.triangles() {
                 let omega = geometry::solid_angle(x, &part);
                 spread_part(
@@ -300,7 +311,7 @@ fn poly_ff_omega(x: DVec3, n_x: DVec3, poly: &Poly, with_ff: bool) -> (f64, f64)
 pub fn exchanges(r: &PatchGeom, s: &PatchGeom, params: &CouplingParams) -> bool {
     let tol = plane_tol(r.size.max(s.size));
     let (front, back) = geometry::clip_by_plane(&s.corners, r.corners[0], r.normal, tol);
-    front.len > 0 || (back.len > 0 && params.two_sided)
+    front.len > 0 || (back.len > 0 && (params.two_sided || r.blocks_back))
 }
 
 /// The receiver side of every coupling into one patch: one fixed set of quadrature points.
@@ -426,7 +437,11 @@ pub fn couple(
     let r = &receiver.geom;
     let tol = plane_tol(r.size.max(s.size));
     let (front, back) = geometry::clip_by_plane(&s.corners, r.corners[0], r.normal, tol);
-    if front.len == 0 && (back.len == 0 || !params.two_sided) {
+    // The receiver takes antiradiance from light arriving at its back; the sender's
+    // antiradiance leaves through its front as well as its back.
+    let receiver_back = params.two_sided || r.blocks_back;
+    let sender_both = params.two_sided || s.blocks_back;
+    if front.len == 0 && (back.len == 0 || !receiver_back) {
         return;
     }
     let far = receiver.q == 1 || separation(r, s) > FAR_RATIO;
@@ -451,7 +466,15 @@ pub fn couple(
         .enumerate()
         .map(|(k, &x)| {
             let omega = [front_omega[0][k], front_omega[1][k]];
-            Spread::new(x, r.normal, (&front_parts, omega), &back, bins, params)
+            Spread::new(
+                x,
+                r.normal,
+                (&front_parts, omega),
+                &back,
+                receiver_back,
+                bins,
+                params,
+            )
         })
         .collect();
     let weight = 1.0 / points.len() as f64;
@@ -469,7 +492,7 @@ pub fn couple(
     // The sender's B reaches a receiver point only if the point is in front of it; its
     // antiradiance leaves through its back (front-only mode) or through either side (two-sided).
     let facing = |x: DVec3| s.normal.dot(x - s.corners[0]) > 0.0;
-    if params.two_sided {
+    if receiver_back || sender_both {
         // Per point: the front and back parts' shares of each bin.
         let mut acc = PointBins::new();
         for (k, &x) in points.iter().enumerate() {
@@ -479,16 +502,21 @@ pub fn couple(
             for &(bin, f_frac, w_frac) in &spread.front {
                 add_point_bin(&mut acc, bin, f_front * f_frac, w_front * w_frac);
             }
-            let (_, w_back) = poly_ff_omega(x, r.normal, &back, false);
-            for &(bin, _, w_frac) in &spread.back {
-                add_point_bin(&mut acc, bin, 0.0, w_back * w_frac);
+            if receiver_back {
+                let (_, w_back) = poly_ff_omega(x, r.normal, &back, false);
+                for &(bin, _, w_frac) in &spread.back {
+                    add_point_bin(&mut acc, bin, 0.0, w_back * w_frac);
+                }
             }
+            let in_front = facing(x);
             for &(bin, f, omega) in &acc {
                 let o = bin_share(omega, bins.solid_angle[bin as usize]);
                 let entry = entry_of(out, bin);
-                entry.f_a += (f * weight) as f32;
-                entry.o_a += (o * weight) as f32;
-                if facing(x) {
+                if sender_both || !in_front {
+                    entry.f_a += (f * weight) as f32;
+                    entry.o_a += (o * weight) as f32;
+                }
+                if in_front {
                     entry.f_b += (f * weight) as f32;
                     entry.o_b += (o * weight) as f32;
                 }

@@ -169,3 +169,71 @@ fn emission_extremes_stay_finite() {
         }
     }
 }
+
+/// A one-sided plate facing away from the light (as a wall exported with the wrong winding):
+/// light reaches its back. Front-only antiradiance lets it through (no shadow); with the
+/// default per-surface decision the plate's back is found exposed and blocks it, as the path
+/// tracer's absorbing back does.
+#[test]
+fn back_lit_plate_casts_a_shadow() {
+    let mut scene = scenes::occluder_scene();
+    for t in 2..4 {
+        scene.triangles[t].swap(1, 2);
+    }
+    let patches = build_patches(&scene, None);
+    let truth = solve_reference(
+        &patches,
+        &ReferenceOptions {
+            spp: 1024,
+            ..ReferenceOptions::default()
+        },
+        &hidden(),
+    );
+    let auto = solve_hierarchical(&patches, &SolverOptions::default(), &hidden());
+    let front_only = solve_hierarchical(
+        &patches,
+        &SolverOptions {
+            block_exposed_backs: false,
+            ..SolverOptions::default()
+        },
+        &hidden(),
+    );
+    let dense = solve_dense(&patches, &SolverOptions::default(), &hidden());
+    let (e_auto, e_front, e_dense) = (
+        error(&scene, &auto, &truth),
+        error(&scene, &front_only, &truth),
+        error(&scene, &dense, &truth),
+    );
+    eprintln!(
+        "back-lit plate: per surface {e_auto:.4}, dense {e_dense:.4}, front-only {e_front:.4}"
+    );
+    assert!(
+        e_front > 0.1,
+        "front-only leaks through the back-lit plate: {e_front}"
+    );
+    assert!(e_auto < 0.08 && e_dense < 0.08, "{e_auto} {e_dense}");
+    assert!(e_auto < 0.5 * e_front, "{e_auto} vs {e_front}");
+}
+
+/// Closed, consistently oriented geometry keeps front-only antiradiance: no back of the
+/// furnace box or of the Cornell box's blocks is exposed.
+#[test]
+fn closed_objects_have_no_exposed_backs() {
+    // A closed cube facing outward, standing above the floor of the occluder scene.
+    let mut cube = scenes::furnace_box(0.0, 0.5);
+    for t in &mut cube.triangles {
+        t.swap(1, 2);
+    }
+    for (name, scene) in [("furnace", scenes::furnace_box(1.0, 0.5)), ("cube", cube)] {
+        let patches = build_patches(&scene, None);
+        let exposed = antiradiance::model::exposed_backs(&patches);
+        assert_eq!(exposed.iter().filter(|&&b| b).count(), 0, "{name}");
+    }
+    // The occluder's plate is an open sheet: its back (facing the floor) is exposed.
+    let patches = build_patches(&scenes::occluder_scene(), None);
+    let exposed = antiradiance::model::exposed_backs(&patches);
+    assert!(
+        exposed[2] && exposed[3] && !exposed[0] && !exposed[4],
+        "{exposed:?}"
+    );
+}
