@@ -57,7 +57,7 @@ solve() {
     rm -f "$report" "$triangles"
     (
         if [ "$MEMORY_MB" != 0 ]; then ulimit -v $((MEMORY_MB * 1024)); fi
-        exec timeout "$TIMEOUT" "$BIN" solve "$obj" "$@" --quiet --report "$report" --triangles "$triangles"
+        exec env -u RUST_BACKTRACE timeout "$TIMEOUT" "$BIN" solve "$obj" "$@" --quiet --report "$report" --triangles "$triangles"
     ) 2> "$err"
     local rc=$?
     if [ $rc -eq 0 ]; then
@@ -107,7 +107,7 @@ for scene in $SCENES; do
         name="$scene-$kind${amount:+-$amount}"
         obj="$OUT/$name.obj"
         echo "$scene: $label" >&2
-        if ! "$BIN" scene variant "$kind" "$mesh" --out "$obj" ${amount:+--amount "$amount"} \
+        if ! env -u RUST_BACKTRACE "$BIN" scene variant "$kind" "$mesh" --out "$obj" ${amount:+--amount "$amount"} \
             "${options[@]}" --quiet 2> "$OUT/$name.variant.stderr"; then
             line=$(grep -m1 '^error:' "$OUT/$name.variant.stderr" || tail -n1 "$OUT/$name.variant.stderr")
             printf '%s\t%s\t%s\t%s\t-\t-\t-\n' "$scene" "$label" "failed: variant: ${line#error: }" "$obj" >> "$RUNS"

@@ -297,6 +297,21 @@ fn variant(a: &VariantArgs) -> Result<()> {
     {
         eprintln!("warning: {}", one_line(w));
     }
+    // The output's MTL file must not replace one the mesh reads.
+    let out_mtl = out.with_extension("mtl");
+    let same = |p: &Path| match (p.canonicalize(), out_mtl.canonicalize()) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    };
+    if let Some(p) = variants::material_files(&a.mesh)?.iter().find(|p| same(p)) {
+        return Err(Error::Io {
+            path: out_mtl.clone(),
+            message: format!(
+                "--out's MTL file would overwrite {}, a material file of the mesh",
+                p.display()
+            ),
+        });
+    }
     let mtl = variants::material_text(&a.mesh)?;
     let variant = variants::make_variant(&scene, a.kind, &variant_options)?;
     let title = format!(

@@ -275,15 +275,14 @@ pub fn resolve_amount(kind: VariantKind, amount: Option<f64>) -> Result<Option<f
     }
 }
 
-/// The text of the material files `obj_path` names (`mtllib`, resolved as
-/// [`crate::scene::load_obj`] resolves them), concatenated in order; files that cannot be read
-/// are left out (the loader warns about them).
+/// The material files `obj_path` names (`mtllib`, resolved as [`crate::scene::load_obj`]
+/// resolves them) that exist, in order.
 ///
 /// Errors: [`Error::Io`] when `obj_path` cannot be read as text.
-pub fn material_text(obj_path: &Path) -> Result<String> {
+pub fn material_files(obj_path: &Path) -> Result<Vec<PathBuf>> {
     let text = std::fs::read_to_string(obj_path).map_err(|e| Error::io(obj_path, e))?;
     let dir = obj_path.parent().unwrap_or(Path::new("."));
-    let mut out = String::new();
+    let mut files = Vec::new();
     for line in text.lines() {
         let line = line.split('#').next().unwrap_or("").trim();
         let Some(rest) = line.strip_prefix("mtllib") else {
@@ -299,12 +298,27 @@ pub fn material_text(obj_path: &Path) -> Result<String> {
         } else {
             name.split_whitespace().collect()
         };
-        for name in names {
-            if let Ok(mtl) = std::fs::read_to_string(dir.join(name)) {
-                out.push_str(mtl.strip_prefix('\u{feff}').unwrap_or(&mtl));
-                if !out.ends_with('\n') {
-                    out.push('\n');
-                }
+        files.extend(
+            names
+                .into_iter()
+                .map(|n| dir.join(n))
+                .filter(|p| p.is_file()),
+        );
+    }
+    Ok(files)
+}
+
+/// The text of the material files `obj_path` names ([`material_files`]), concatenated in
+/// order; files that cannot be read are left out (the loader warns about them).
+///
+/// Errors: [`Error::Io`] when `obj_path` cannot be read as text.
+pub fn material_text(obj_path: &Path) -> Result<String> {
+    let mut out = String::new();
+    for path in material_files(obj_path)? {
+        if let Ok(mtl) = std::fs::read_to_string(&path) {
+            out.push_str(mtl.strip_prefix('\u{feff}').unwrap_or(&mtl));
+            if !out.ends_with('\n') {
+                out.push('\n');
             }
         }
     }
