@@ -70,14 +70,24 @@ pub fn cos_sin_turn(i: usize, n: usize) -> (f64, f64) {
                     - x2 / 20.0
                         * (1.0
                             - x2 / 42.0
-                                * (1.0 - x2 / 72.0 * (1.0 - x2 / 110.0 * (1.0 - x2 / 156.0 * (1.0 - x2 / 210.0)))))));
+                                * (1.0
+                                    - x2 / 72.0
+                                        * (1.0
+                                            - x2 / 110.0
+                                                * (1.0 - x2 / 156.0 * (1.0 - x2 / 210.0)))))));
     let c = 1.0
         - x2 / 2.0
             * (1.0
                 - x2 / 12.0
                     * (1.0
                         - x2 / 30.0
-                            * (1.0 - x2 / 56.0 * (1.0 - x2 / 90.0 * (1.0 - x2 / 132.0 * (1.0 - x2 / 182.0 * (1.0 - x2 / 240.0)))))));
+                            * (1.0
+                                - x2 / 56.0
+                                    * (1.0
+                                        - x2 / 90.0
+                                            * (1.0
+                                                - x2 / 132.0
+                                                    * (1.0 - x2 / 182.0 * (1.0 - x2 / 240.0)))))));
     match (q as i64).rem_euclid(4) {
         0 => (c, s),
         1 => (-s, c),
@@ -177,7 +187,12 @@ impl Cad {
             for sign in [1.0, -1.0] {
                 let centre = c + d * sign;
                 self.polygon(
-                    &[centre - e - f, centre + e - f, centre + e + f, centre - e + f],
+                    &[
+                        centre - e - f,
+                        centre + e - f,
+                        centre + e + f,
+                        centre - e + f,
+                    ],
                     d * sign,
                     m,
                 );
@@ -353,7 +368,12 @@ fn wall_with_openings(
         x = b;
     }
     cad.polygon(
-        &[v(x, sill, z), v(width, sill, z), v(width, head, z), v(x, head, z)],
+        &[
+            v(x, sill, z),
+            v(width, sill, z),
+            v(width, head, z),
+            v(x, head, z),
+        ],
         facing,
         wall,
     );
@@ -385,7 +405,12 @@ pub fn classroom(seed: u64) -> Interior {
 
     // Room shell: the floor, the ceiling in two halves, four walls.
     cad.big_rectangle(
-        [v(0.0, 0.0, 0.0), v(w, 0.0, 0.0), v(w, 0.0, d), v(0.0, 0.0, d)],
+        [
+            v(0.0, 0.0, 0.0),
+            v(w, 0.0, 0.0),
+            v(w, 0.0, d),
+            v(0.0, 0.0, d),
+        ],
         14,
         up,
         FLOOR,
@@ -424,7 +449,12 @@ pub fn classroom(seed: u64) -> Interior {
         WALL,
     );
     cad.big_rectangle(
-        [v(0.0, 0.0, 0.0), v(0.0, 0.0, d), v(0.0, h, d), v(0.0, h, 0.0)],
+        [
+            v(0.0, 0.0, 0.0),
+            v(0.0, 0.0, d),
+            v(0.0, h, d),
+            v(0.0, h, 0.0),
+        ],
         8,
         v(1.0, 0.0, 0.0),
         WALL,
@@ -463,8 +493,16 @@ pub fn classroom(seed: u64) -> Interior {
             // Chair, pulled out by 0-10 cm.
             let pull = 0.1 * cad.rng.next_f64();
             let (cx, cz) = (x, z - 0.5 - pull);
-            cad.block(v(cx - 0.21, 0.43, cz - 0.21), v(cx + 0.21, 0.46, cz + 0.21), CHAIR);
-            cad.block(v(cx - 0.21, 0.52, cz - 0.22), v(cx + 0.21, 0.85, cz - 0.2), CHAIR);
+            cad.block(
+                v(cx - 0.21, 0.43, cz - 0.21),
+                v(cx + 0.21, 0.46, cz + 0.21),
+                CHAIR,
+            );
+            cad.block(
+                v(cx - 0.21, 0.52, cz - 0.22),
+                v(cx + 0.21, 0.85, cz - 0.2),
+                CHAIR,
+            );
             legs(
                 &mut cad,
                 (cx - 0.18, cx + 0.18),
@@ -483,7 +521,11 @@ pub fn classroom(seed: u64) -> Interior {
     // Tube lights: 1.2 m tubes of radius 16 mm under housings hanging from the ceiling.
     for z in [1.5, 3.5, 5.5] {
         for x in [1.4, 3.45, 5.55, 7.6] {
-            cad.block(v(x - 0.64, 2.83, z - 0.06), v(x + 0.64, 2.9, z + 0.06), HOUSING);
+            cad.block(
+                v(x - 0.64, 2.83, z - 0.06),
+                v(x + 0.64, 2.9, z + 0.06),
+                HOUSING,
+            );
             cad.cylinder(0, v(x - 0.6, 2.8, z), 1.2, 0.016, 16, true, TUBE);
         }
     }
@@ -515,7 +557,12 @@ pub fn office(seed: u64) -> Interior {
 
     // Room shell: large polygons.
     cad.big_rectangle(
-        [v(0.0, 0.0, 0.0), v(w, 0.0, 0.0), v(w, 0.0, d), v(0.0, 0.0, d)],
+        [
+            v(0.0, 0.0, 0.0),
+            v(w, 0.0, 0.0),
+            v(w, 0.0, d),
+            v(0.0, 0.0, d),
+        ],
         10,
         up,
         FLOOR,
@@ -543,7 +590,12 @@ pub fn office(seed: u64) -> Interior {
         WALL,
     );
     cad.big_rectangle(
-        [v(0.0, 0.0, 0.0), v(0.0, 0.0, d), v(0.0, h, d), v(0.0, h, 0.0)],
+        [
+            v(0.0, 0.0, 0.0),
+            v(0.0, 0.0, d),
+            v(0.0, h, d),
+            v(0.0, h, 0.0),
+        ],
         6,
         v(1.0, 0.0, 0.0),
         WALL,
@@ -557,27 +609,52 @@ pub fn office(seed: u64) -> Interior {
     // The window's reveal, 25 cm deep, and the sky pane closing it.
     let back = -0.25;
     cad.polygon(
-        &[v(wx0, sill, 0.0), v(wx1, sill, 0.0), v(wx1, sill, back), v(wx0, sill, back)],
+        &[
+            v(wx0, sill, 0.0),
+            v(wx1, sill, 0.0),
+            v(wx1, sill, back),
+            v(wx0, sill, back),
+        ],
         up,
         WALL,
     );
     cad.polygon(
-        &[v(wx0, head, 0.0), v(wx1, head, 0.0), v(wx1, head, back), v(wx0, head, back)],
+        &[
+            v(wx0, head, 0.0),
+            v(wx1, head, 0.0),
+            v(wx1, head, back),
+            v(wx0, head, back),
+        ],
         -up,
         WALL,
     );
     cad.polygon(
-        &[v(wx0, sill, 0.0), v(wx0, head, 0.0), v(wx0, head, back), v(wx0, sill, back)],
+        &[
+            v(wx0, sill, 0.0),
+            v(wx0, head, 0.0),
+            v(wx0, head, back),
+            v(wx0, sill, back),
+        ],
         v(1.0, 0.0, 0.0),
         WALL,
     );
     cad.polygon(
-        &[v(wx1, sill, 0.0), v(wx1, head, 0.0), v(wx1, head, back), v(wx1, sill, back)],
+        &[
+            v(wx1, sill, 0.0),
+            v(wx1, head, 0.0),
+            v(wx1, head, back),
+            v(wx1, sill, back),
+        ],
         v(-1.0, 0.0, 0.0),
         WALL,
     );
     cad.polygon(
-        &[v(wx0, sill, back), v(wx1, sill, back), v(wx1, head, back), v(wx0, head, back)],
+        &[
+            v(wx0, sill, back),
+            v(wx1, sill, back),
+            v(wx1, head, back),
+            v(wx0, head, back),
+        ],
         v(0.0, 0.0, 1.0),
         OFFICE_SKY,
     );
@@ -598,23 +675,55 @@ pub fn office(seed: u64) -> Interior {
         );
     }
     let bottom = head - 0.03 - 0.021 * (slats - 1) as f64 - 0.02;
-    cad.block(v(bx0, head - 0.01, bz - 0.03), v(bx1, head + 0.04, bz + 0.03), SLAT);
-    cad.block(v(bx0, bottom - 0.012, bz - 0.012), v(bx1, bottom, bz + 0.012), SLAT);
+    cad.block(
+        v(bx0, head - 0.01, bz - 0.03),
+        v(bx1, head + 0.04, bz + 0.03),
+        SLAT,
+    );
+    cad.block(
+        v(bx0, bottom - 0.012, bz - 0.012),
+        v(bx1, bottom, bz + 0.012),
+        SLAT,
+    );
     for x in [bx0 + 0.35, bx1 - 0.35] {
         for z in [bz - 0.012, bz + 0.012] {
-            cad.cylinder(1, v(x, bottom, z), head - 0.01 - bottom, 0.001, 6, true, CORD);
+            cad.cylinder(
+                1,
+                v(x, bottom, z),
+                head - 0.01 - bottom,
+                0.001,
+                6,
+                true,
+                CORD,
+            );
         }
     }
 
     // Desk facing the window: a top on two side panels, a modesty panel.
     let (dx0, dx1, dz0, dz1, top) = (1.2, 2.8, 1.2, 2.0, 0.76);
     cad.block(v(dx0, top - 0.04, dz0), v(dx1, top, dz1), WOOD);
-    cad.block(v(dx0 + 0.02, 0.0, dz0 + 0.05), v(dx0 + 0.05, top - 0.04, dz1 - 0.05), WOOD);
-    cad.block(v(dx1 - 0.05, 0.0, dz0 + 0.05), v(dx1 - 0.02, top - 0.04, dz1 - 0.05), WOOD);
-    cad.block(v(dx0 + 0.05, 0.3, dz0 + 0.05), v(dx1 - 0.05, top - 0.06, dz0 + 0.07), WOOD);
+    cad.block(
+        v(dx0 + 0.02, 0.0, dz0 + 0.05),
+        v(dx0 + 0.05, top - 0.04, dz1 - 0.05),
+        WOOD,
+    );
+    cad.block(
+        v(dx1 - 0.05, 0.0, dz0 + 0.05),
+        v(dx1 - 0.02, top - 0.04, dz1 - 0.05),
+        WOOD,
+    );
+    cad.block(
+        v(dx0 + 0.05, 0.3, dz0 + 0.05),
+        v(dx1 - 0.05, top - 0.06, dz0 + 0.07),
+        WOOD,
+    );
     // Monitor (stand, screen), keyboard, mug.
     cad.block(v(1.9, top, 1.3), v(2.1, top + 0.01, 1.45), PLASTIC);
-    cad.block(v(1.98, top + 0.01, 1.36), v(2.02, top + 0.12, 1.39), PLASTIC);
+    cad.block(
+        v(1.98, top + 0.01, 1.36),
+        v(2.02, top + 0.12, 1.39),
+        PLASTIC,
+    );
     cad.block(v(1.72, top + 0.12, 1.33), v(2.28, top + 0.45, 1.36), SCREEN);
     cad.block(v(1.78, top, 1.55), v(2.22, top + 0.02, 1.7), PLASTIC);
     cad.cylinder(1, v(2.45, top, 1.75), 0.1, 0.04, 20, true, MUG);
@@ -639,17 +748,33 @@ pub fn office(seed: u64) -> Interior {
     let (chx, chz) = (2.0, 2.45 + 0.1 * cad.rng.next_f64());
     cad.cylinder(1, v(chx, 0.02, chz), 0.03, 0.3, 24, true, PLASTIC);
     cad.cylinder(1, v(chx, 0.05, chz), 0.38, 0.025, 12, true, METAL);
-    cad.block(v(chx - 0.24, 0.43, chz - 0.24), v(chx + 0.24, 0.5, chz + 0.24), CHAIR);
-    cad.block(v(chx - 0.22, 0.55, chz + 0.24), v(chx + 0.22, 1.0, chz + 0.28), CHAIR);
+    cad.block(
+        v(chx - 0.24, 0.43, chz - 0.24),
+        v(chx + 0.24, 0.5, chz + 0.24),
+        CHAIR,
+    );
+    cad.block(
+        v(chx - 0.22, 0.55, chz + 0.24),
+        v(chx + 0.22, 1.0, chz + 0.28),
+        CHAIR,
+    );
 
     // Bookshelf against the side wall x = w: two sides, a back, six boards, books.
     let (sx0, sx1, sz0, sz1, sh) = (w - 0.36, w - 0.01, 2.5, 4.0, 2.0);
     cad.block(v(sx0, 0.0, sz0), v(sx1, sh, sz0 + 0.02), SHELF);
     cad.block(v(sx0, 0.0, sz1 - 0.02), v(sx1, sh, sz1), SHELF);
-    cad.block(v(sx1 - 0.01, 0.0, sz0 + 0.02), v(sx1, sh, sz1 - 0.02), SHELF);
+    cad.block(
+        v(sx1 - 0.01, 0.0, sz0 + 0.02),
+        v(sx1, sh, sz1 - 0.02),
+        SHELF,
+    );
     for k in 0..6 {
         let y = 0.05 + 0.38 * k as f64;
-        cad.block(v(sx0, y, sz0 + 0.02), v(sx1 - 0.01, y + 0.02, sz1 - 0.02), SHELF);
+        cad.block(
+            v(sx0, y, sz0 + 0.02),
+            v(sx1 - 0.01, y + 0.02, sz1 - 0.02),
+            SHELF,
+        );
         if k == 5 {
             break;
         }
@@ -658,7 +783,11 @@ pub fn office(seed: u64) -> Interior {
         while z < sz1 - 0.15 {
             let width = 0.025 + 0.03 * cad.rng.next_f64();
             let tall = 0.22 + 0.1 * cad.rng.next_f64();
-            cad.block(v(sx0 + 0.03, y + 0.02, z), v(sx1 - 0.03, y + 0.02 + tall, z + width), BOOKS[b % 3]);
+            cad.block(
+                v(sx0 + 0.03, y + 0.02, z),
+                v(sx1 - 0.03, y + 0.02 + tall, z + width),
+                BOOKS[b % 3],
+            );
             z += width + 0.004;
             b += 1;
         }

@@ -2,9 +2,14 @@
 //! documentation was measured on can be made again by a user.
 //!
 //! The geometry is built by [`crate::scenes`] ([`scenes::cornell_box`],
-//! [`scenes::subdivided_cornell_box`], [`scenes::in_room`], [`scenes::under_light`]) and written
-//! by [`scenes::write_obj`] (atomic, MTL file next to the OBJ file). Every light is a material
-//! with `Ke`, so the written scenes solve with default options (no `--emit-above`).
+//! [`scenes::subdivided_cornell_box`], [`scenes::in_room`], [`scenes::under_light`]) and
+//! [`crate::interiors`] ([`interiors::classroom`], [`interiors::office`]) and written by
+//! [`scenes::write_obj`] (atomic, MTL file next to the OBJ file). Every light is a material with
+//! `Ke`, so the written scenes solve with default options (no `--emit-above`).
+//!
+//! `scene variant` writes a mesh's geometry triangulated badly ([`variants::make_variant`],
+//! [`variants::write_variant`]), with the mesh's own materials and a map back to its
+//! triangles; the scene options that applied to the mesh apply to the variant.
 //!
 //! As in the other commands, every parameter and the output path are checked before the mesh is
 //! loaded, a bad mesh gives the loader's one-line `file:line: message` error, and nothing is
@@ -16,9 +21,9 @@ use clap::{Args, Subcommand};
 
 use crate::driver::{check_outputs, one_line, MAX_PATCHES};
 use crate::error::{Error, Result};
+use crate::interiors;
 use crate::scene::{self, Scene, SceneOptions};
 use crate::scenes;
-use crate::interiors;
 use crate::variants::{self, VariantKind, VariantOptions};
 
 /// Arguments of `antiradiance scene`.
@@ -123,14 +128,24 @@ pub struct VariantArgs {
     /// Grey albedo in [0, 1) for triangles whose material has no Kd (as for solve; it decides
     /// which triangles are the same material for huge-tiny; the output keeps the mesh's
     /// materials).
-    #[arg(long, value_name = "A", default_value_t = 0.75, allow_negative_numbers = true)]
+    #[arg(
+        long,
+        value_name = "A",
+        default_value_t = 0.75,
+        allow_negative_numbers = true
+    )]
     pub albedo: f64,
     /// As for solve: triangles with all three vertices above Y emit (used only to tell
     /// materials apart; pass it again when solving the output).
     #[arg(long, value_name = "Y", allow_negative_numbers = true)]
     pub emit_above: Option<f64>,
     /// As for solve: the radiance of the --emit-above emitters.
-    #[arg(long, value_name = "L", default_value_t = 1.0, allow_negative_numbers = true)]
+    #[arg(
+        long,
+        value_name = "L",
+        default_value_t = 1.0,
+        allow_negative_numbers = true
+    )]
     pub emission: f64,
     /// The output file; the map goes next to it (same name, extension .map.csv).
     #[command(flatten)]

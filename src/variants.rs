@@ -292,8 +292,7 @@ pub fn material_files(obj_path: &Path) -> Result<Vec<PathBuf>> {
             continue;
         }
         let name = rest.trim();
-        let names: Vec<&str> = if dir.join(name).is_file() || !name.contains(char::is_whitespace)
-        {
+        let names: Vec<&str> = if dir.join(name).is_file() || !name.contains(char::is_whitespace) {
             vec![name]
         } else {
             name.split_whitespace().collect()
@@ -331,10 +330,13 @@ pub fn material_text(obj_path: &Path) -> Result<String> {
 /// go to every triangle made from them. Degenerate input triangles are copied unchanged.
 ///
 /// Errors: [`Error::Parameter`] for an empty scene, an amount outside its range
-/// ([`resolve_amount`]) or a variant of more than [`MAX_PATCHES`] triangles.
+/// ([`resolve_amount`]), a variant of more than [`MAX_PATCHES`] triangles or one with a
+/// non-finite vertex (a translation or jitter beyond the range of f64).
 pub fn make_variant(scene: &Scene, kind: VariantKind, options: &VariantOptions) -> Result<Variant> {
     if scene.is_empty() {
-        return Err(Error::Parameter("variant: the scene has no triangles".into()));
+        return Err(Error::Parameter(
+            "variant: the scene has no triangles".into(),
+        ));
     }
     let amount = resolve_amount(kind, options.amount)?;
     let a = amount.unwrap_or(0.0);
@@ -356,7 +358,10 @@ pub fn make_variant(scene: &Scene, kind: VariantKind, options: &VariantOptions) 
             too_many(n as u64 * (2 * k as u64 - 1))?;
             (
                 fan(scene, k),
-                format!("fan: every triangle split into {} slivers (k = {k})", 2 * k - 1),
+                format!(
+                    "fan: every triangle split into {} slivers (k = {k})",
+                    2 * k - 1
+                ),
             )
         }
         VariantKind::Random => {
@@ -370,18 +375,21 @@ pub fn make_variant(scene: &Scene, kind: VariantKind, options: &VariantOptions) 
             )
         }
         VariantKind::Jitter => (
-                jitter(scene, a, seed),
-                format!("jitter: every vertex moved by at most {a}, seed {seed}"),
-            ),
+            jitter(scene, a, seed),
+            format!("jitter: every vertex moved by at most {a}, seed {seed}"),
+        ),
         VariantKind::Translate => (
-                translate(scene, a),
-                format!("translate: every vertex moved by ({a}, {a}, {a})"),
-            ),
+            translate(scene, a),
+            format!("translate: every vertex moved by ({a}, {a}, {a})"),
+        ),
         VariantKind::Twins => {
             too_many(2 * n as u64)?;
             (
                 twins(scene),
-                format!("twins: triangles 0..{n} as given, {n}..{} their reversed copies", 2 * n),
+                format!(
+                    "twins: triangles 0..{n} as given, {n}..{} their reversed copies",
+                    2 * n
+                ),
             )
         }
         VariantKind::Tjunction => {
@@ -401,6 +409,16 @@ pub fn make_variant(scene: &Scene, kind: VariantKind, options: &VariantOptions) 
             (out, note)
         }
     };
+    if let Some(t) = out
+        .tris
+        .iter()
+        .position(|t| !t.iter().all(|p| p.is_finite()))
+    {
+        return Err(Error::Parameter(format!(
+            "the {} variant's triangle {t} has a non-finite vertex (--amount {a} too large)",
+            kind.name()
+        )));
+    }
     Ok(assemble(scene, out, kind, amount, seed, note))
 }
 
@@ -567,7 +585,11 @@ fn split_triangle(
     min_share: f64,
 ) -> Vec<[DVec3; 3]> {
     // Local vertices: (barycentric weights of corners 1 and 2, position, (edge, parameter)).
-    let unit = [DVec2::new(0.0, 0.0), DVec2::new(1.0, 0.0), DVec2::new(0.0, 1.0)];
+    let unit = [
+        DVec2::new(0.0, 0.0),
+        DVec2::new(1.0, 0.0),
+        DVec2::new(0.0, 1.0),
+    ];
     let mut local: Vec<(DVec2, DVec3, Option<(usize, f64)>)> =
         (0..3).map(|i| (unit[i], corners[i], None)).collect();
     let mut tris: Vec<[usize; 3]> = vec![[0, 1, 2]];
@@ -1160,7 +1182,8 @@ fn huge_tiny(scene: &Scene, tiny: usize) -> Result<(Out, String)> {
         }
         None => (Vec::new(), 1),
     };
-    let in_object: HashMap<usize, usize> = object.iter().enumerate().map(|(i, &t)| (t, i)).collect();
+    let in_object: HashMap<usize, usize> =
+        object.iter().enumerate().map(|(i, &t)| (t, i)).collect();
     let pieces = if object.is_empty() {
         Scene::default()
     } else {
@@ -1174,10 +1197,16 @@ fn huge_tiny(scene: &Scene, tiny: usize) -> Result<(Out, String)> {
     let mut rows: Vec<Vec<(usize, f64)>> = vec![Vec::new(); merged.tris.len()];
     for &t in &region {
         let flat = scene.corners(t).map(|p| frame.flat(p));
-        let (fmin, fmax) = (flat[0].min(flat[1]).min(flat[2]), flat[0].max(flat[1]).max(flat[2]));
+        let (fmin, fmax) = (
+            flat[0].min(flat[1]).min(flat[2]),
+            flat[0].max(flat[1]).max(flat[2]),
+        );
         let mut overlaps: Vec<(usize, f64)> = Vec::new();
         for (m, tri) in merged.flat.iter().enumerate() {
-            let (tmin, tmax) = (tri[0].min(tri[1]).min(tri[2]), tri[0].max(tri[1]).max(tri[2]));
+            let (tmin, tmax) = (
+                tri[0].min(tri[1]).min(tri[2]),
+                tri[0].max(tri[1]).max(tri[2]),
+            );
             if tmin.x > fmax.x || tmin.y > fmax.y || tmax.x < fmin.x || tmax.y < fmin.y {
                 continue;
             }
@@ -1282,7 +1311,9 @@ pub fn write_variant(variant: &Variant, out: &Path, mtl_text: &str, title: &str)
         "# vertices: {}, triangles: {}; map: {}",
         scene.positions.len(),
         scene.len(),
-        map.file_name().map(|n| n.to_string_lossy()).unwrap_or_default()
+        map.file_name()
+            .map(|n| n.to_string_lossy())
+            .unwrap_or_default()
     );
     let _ = writeln!(obj, "mtllib {mtl_name}");
     for p in &scene.positions {
@@ -1403,7 +1434,11 @@ pub fn read_map(path: &Path) -> Result<Vec<MapRow>> {
 ///
 /// Errors: [`Error::Parameter`] when a row names a variant triangle beyond
 /// `variant_radiance` or an original triangle beyond `originals`.
-pub fn map_back(map: &[MapRow], originals: usize, variant_radiance: &[[f64; 3]]) -> Result<Vec<[f64; 3]>> {
+pub fn map_back(
+    map: &[MapRow],
+    originals: usize,
+    variant_radiance: &[[f64; 3]],
+) -> Result<Vec<[f64; 3]>> {
     let mut weighted = vec![[0.0f64; 3]; originals];
     let mut area = vec![0.0f64; originals];
     let mut plain = vec![[0.0f64; 3]; originals];

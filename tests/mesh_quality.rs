@@ -22,8 +22,8 @@ use antiradiance::scenes::{furnace_box, write_obj};
 use antiradiance::solution::{relative_error, Solution};
 use antiradiance::solve::SolverOptions;
 use antiradiance::variants::{
-    aspect_ratio, make_variant, map_back, map_path, material_text, read_map, write_variant,
-    MapRow, Variant, VariantKind, VariantOptions, MAP_CSV_HEADER,
+    aspect_ratio, make_variant, map_back, map_path, material_text, read_map, write_variant, MapRow,
+    Variant, VariantKind, VariantOptions, MAP_CSV_HEADER,
 };
 use glam::DVec3;
 
@@ -40,7 +40,11 @@ fn cornell() -> Scene {
 
 /// A variant of the Cornell box written to `dir` and read back: (input, the variant in memory,
 /// the scene read back, the map read back).
-fn written(dir: &Path, kind: VariantKind, amount: Option<f64>) -> (Scene, Variant, Scene, Vec<MapRow>) {
+fn written(
+    dir: &Path,
+    kind: VariantKind,
+    amount: Option<f64>,
+) -> (Scene, Variant, Scene, Vec<MapRow>) {
     let input = cornell();
     let options = VariantOptions { seed: 1, amount };
     let variant = make_variant(&input, kind, &options).unwrap();
@@ -79,52 +83,113 @@ fn assert_close(got: f64, want: f64, rel: f64, what: &str) {
 /// What every variant must do: read back exactly, the same area per material (`area_tol`
 /// relative; twins counted on their original side), materials and orientation kept through
 /// the map, every output triangle mapped, every input triangle's area given back exactly.
-fn check_common(kind: VariantKind, amount: Option<f64>, area_tol: f64) -> (Scene, Scene, Vec<MapRow>) {
+fn check_common(
+    kind: VariantKind,
+    amount: Option<f64>,
+    area_tol: f64,
+) -> (Scene, Scene, Vec<MapRow>) {
     let dir = tempfile::tempdir().unwrap();
     let (input, variant, back, map) = written(dir.path(), kind, amount);
     let what = kind.name();
     // Read back bit for bit, materials included.
     assert_eq!(back.len(), variant.scene.len(), "{what}: triangle count");
     for t in 0..back.len() {
-        assert_eq!(back.corners(t), variant.scene.corners(t), "{what}: corners of {t}");
-        assert_eq!(back.albedo[t], variant.scene.albedo[t], "{what}: albedo of {t}");
-        assert_eq!(back.emission[t], variant.scene.emission[t], "{what}: emission of {t}");
-        assert_eq!(back.material_name(t), variant.scene.material_name(t), "{what}: material of {t}");
+        assert_eq!(
+            back.corners(t),
+            variant.scene.corners(t),
+            "{what}: corners of {t}"
+        );
+        assert_eq!(
+            back.albedo[t], variant.scene.albedo[t],
+            "{what}: albedo of {t}"
+        );
+        assert_eq!(
+            back.emission[t], variant.scene.emission[t],
+            "{what}: emission of {t}"
+        );
+        assert_eq!(
+            back.material_name(t),
+            variant.scene.material_name(t),
+            "{what}: material of {t}"
+        );
     }
     assert_eq!(map, variant.map, "{what}: the map reads back");
     // Area per material.
-    let same_side: HashSet<u32> = map.iter().filter(|r| r.same_side).map(|r| r.variant).collect();
+    let same_side: HashSet<u32> = map
+        .iter()
+        .filter(|r| r.same_side)
+        .map(|r| r.variant)
+        .collect();
     let want = area_per_material(&input, |_| true);
     let got = area_per_material(&back, |t| same_side.contains(&(t as u32)));
-    assert_eq!(want.len(), got.len(), "{what}: materials {want:?} / {got:?}");
+    assert_eq!(
+        want.len(),
+        got.len(),
+        "{what}: materials {want:?} / {got:?}"
+    );
     for (name, a) in &want {
-        assert_close(got[name], *a, area_tol, &format!("{what}: area of material {name}"));
+        assert_close(
+            got[name],
+            *a,
+            area_tol,
+            &format!("{what}: area of material {name}"),
+        );
     }
     // The map: every output triangle, every input triangle's area, the same material and side.
     let mut per_variant = vec![0.0; back.len()];
     let mut per_original = vec![0.0; input.len()];
     for r in &map {
         let (v, o) = (r.variant as usize, r.original as usize);
-        assert!(v < back.len() && o < input.len(), "{what}: row {r:?} out of range");
+        assert!(
+            v < back.len() && o < input.len(),
+            "{what}: row {r:?} out of range"
+        );
         per_variant[v] += r.area;
         if r.same_side {
             per_original[o] += r.area;
         }
-        assert_eq!(back.albedo[v], input.albedo[o], "{what}: albedo through {r:?}");
-        assert_eq!(back.emission[v], input.emission[o], "{what}: emission through {r:?}");
-        assert_eq!(back.material_name(v), input.material_name(o), "{what}: material through {r:?}");
+        assert_eq!(
+            back.albedo[v], input.albedo[o],
+            "{what}: albedo through {r:?}"
+        );
+        assert_eq!(
+            back.emission[v], input.emission[o],
+            "{what}: emission through {r:?}"
+        );
+        assert_eq!(
+            back.material_name(v),
+            input.material_name(o),
+            "{what}: material through {r:?}"
+        );
         let facing = normal(&back, v).dot(normal(&input, o));
         assert!(
-            if r.same_side { facing > 0.0 } else { facing < 0.0 },
+            if r.same_side {
+                facing > 0.0
+            } else {
+                facing < 0.0
+            },
             "{what}: {r:?} faces {facing}"
         );
     }
     for v in 0..back.len() {
-        assert!(map.iter().any(|r| r.variant as usize == v), "{what}: triangle {v} unmapped");
-        assert_close(per_variant[v], back.area(v), area_tol, &format!("{what}: mapped area of variant triangle {v}"));
+        assert!(
+            map.iter().any(|r| r.variant as usize == v),
+            "{what}: triangle {v} unmapped"
+        );
+        assert_close(
+            per_variant[v],
+            back.area(v),
+            area_tol,
+            &format!("{what}: mapped area of variant triangle {v}"),
+        );
     }
     for o in 0..input.len() {
-        assert_close(per_original[o], input.area(o), 1e-9, &format!("{what}: area given back to input triangle {o}"));
+        assert_close(
+            per_original[o],
+            input.area(o),
+            1e-9,
+            &format!("{what}: area given back to input triangle {o}"),
+        );
     }
     (input, back, map)
 }
@@ -169,16 +234,39 @@ fn fan_keeps_areas_and_maps_every_triangle() {
 #[test]
 fn fan_produces_triangles_of_higher_aspect_ratio() {
     let (input, back, _) = check_common(VariantKind::Fan, None, 1e-9);
-    assert_eq!(back.len(), input.len() * 15, "2k - 1 = 15 slivers per triangle");
+    assert_eq!(
+        back.len(),
+        input.len() * 15,
+        "2k - 1 = 15 slivers per triangle"
+    );
     let mean = |s: &Scene| {
         let total: f64 = (0..s.len()).map(|t| s.area(t)).sum();
-        (0..s.len()).map(|t| s.area(t) * aspect_ratio(&s.corners(t))).sum::<f64>() / total
+        (0..s.len())
+            .map(|t| s.area(t) * aspect_ratio(&s.corners(t)))
+            .sum::<f64>()
+            / total
     };
-    let max = |s: &Scene| (0..s.len()).map(|t| aspect_ratio(&s.corners(t))).fold(0.0, f64::max);
+    let max = |s: &Scene| {
+        (0..s.len())
+            .map(|t| aspect_ratio(&s.corners(t)))
+            .fold(0.0, f64::max)
+    };
     let (before, after) = (mean(&input), mean(&back));
-    assert!(after > 4.0 * before, "area-weighted mean aspect ratio {before} -> {after}");
-    assert!(max(&back) > 4.0 * max(&input), "largest aspect ratio {} -> {}", max(&input), max(&back));
-    assert_eq!(t_junctions(&back), t_junctions(&input), "fan adds no T-junction");
+    assert!(
+        after > 4.0 * before,
+        "area-weighted mean aspect ratio {before} -> {after}"
+    );
+    assert!(
+        max(&back) > 4.0 * max(&input),
+        "largest aspect ratio {} -> {}",
+        max(&input),
+        max(&back)
+    );
+    assert_eq!(
+        t_junctions(&back),
+        t_junctions(&input),
+        "fan adds no T-junction"
+    );
 }
 
 #[test]
@@ -193,13 +281,25 @@ fn random_keeps_areas_and_maps_every_triangle() {
     assert_eq!(t_junctions(&v.scene), 0, "random adds no T-junction");
     // Irregular: the pieces of one input triangle have many different areas.
     let areas: HashSet<u64> = (0..back.len()).map(|t| back.area(t).to_bits()).collect();
-    assert!(areas.len() > back.len() / 2, "{} distinct areas among {}", areas.len(), back.len());
+    assert!(
+        areas.len() > back.len() / 2,
+        "{} distinct areas among {}",
+        areas.len(),
+        back.len()
+    );
 }
 
 #[test]
 fn random_is_seeded() {
     let input = cornell();
-    let with = |seed| make_variant(&input, VariantKind::Random, &VariantOptions { seed, amount: None }).unwrap();
+    let with = |seed| {
+        make_variant(
+            &input,
+            VariantKind::Random,
+            &VariantOptions { seed, amount: None },
+        )
+        .unwrap()
+    };
     let (a, b, c) = (with(1), with(1), with(2));
     assert_eq!(a.scene.positions, b.scene.positions);
     assert_eq!(a.map, b.map);
@@ -214,7 +314,11 @@ fn jitter_moves_no_vertex_more_than_the_amount() {
     let bound = (0..input.len())
         .map(|t| {
             let c = input.corners(t);
-            (0..3).map(|i| (c[(i + 1) % 3] - c[i]).length()).sum::<f64>() * amount / input.area(t)
+            (0..3)
+                .map(|i| (c[(i + 1) % 3] - c[i]).length())
+                .sum::<f64>()
+                * amount
+                / input.area(t)
         })
         .fold(0.0, f64::max);
     let (input, back, map) = check_common(VariantKind::Jitter, Some(amount), 2.0 * bound);
@@ -222,7 +326,10 @@ fn jitter_moves_no_vertex_more_than_the_amount() {
     let mut moved_to: HashMap<[u64; 3], DVec3> = HashMap::new();
     let mut moved = 0;
     for r in &map {
-        let (before, after) = (input.corners(r.original as usize), back.corners(r.variant as usize));
+        let (before, after) = (
+            input.corners(r.original as usize),
+            back.corners(r.variant as usize),
+        );
         for i in 0..3 {
             let d = (after[i] - before[i]).length();
             assert!(d <= amount, "vertex {:?} moved by {d}", before[i]);
@@ -241,8 +348,15 @@ fn translate_is_exact() {
         let (input, back, map) = check_common(VariantKind::Translate, Some(amount), 1e-9);
         assert_eq!(back.len(), input.len());
         for r in &map {
-            let (before, after) = (input.corners(r.original as usize), back.corners(r.variant as usize));
-            assert_eq!(after, before.map(|p| p + DVec3::splat(amount)), "{amount}: {r:?}");
+            let (before, after) = (
+                input.corners(r.original as usize),
+                back.corners(r.variant as usize),
+            );
+            assert_eq!(
+                after,
+                before.map(|p| p + DVec3::splat(amount)),
+                "{amount}: {r:?}"
+            );
         }
     }
 }
@@ -296,7 +410,12 @@ fn huge_tiny_merges_a_flat_region_into_few_triangles() {
     for j in 0..8 {
         for i in 0..8 {
             let (x0, z0, x1, z1) = (i as f64, j as f64, i as f64 + 1.0, j as f64 + 1.0);
-            let q = [DVec3::new(x0, 0.0, z0), DVec3::new(x0, 0.0, z1), DVec3::new(x1, 0.0, z1), DVec3::new(x1, 0.0, z0)];
+            let q = [
+                DVec3::new(x0, 0.0, z0),
+                DVec3::new(x0, 0.0, z1),
+                DVec3::new(x1, 0.0, z1),
+                DVec3::new(x1, 0.0, z0),
+            ];
             corners.push([q[0], q[1], q[2]]);
             corners.push([q[0], q[2], q[3]]);
         }
@@ -311,15 +430,44 @@ fn huge_tiny_merges_a_flat_region_into_few_triangles() {
     albedo[floor + 2] = [0.0; 3];
     emission[floor + 2] = [1.0; 3];
     let scene = Scene::from_triangles(&corners, &albedo, &emission);
-    let v = make_variant(&scene, VariantKind::HugeTiny, &VariantOptions { seed: 1, amount: Some(100.0) }).unwrap();
-    let merged: HashSet<u32> = v.map.iter().filter(|r| (r.original as usize) < floor).map(|r| r.variant).collect();
-    assert_eq!(merged.len(), 2, "the 8 x 8 floor as two triangles: {}", v.note);
+    let v = make_variant(
+        &scene,
+        VariantKind::HugeTiny,
+        &VariantOptions {
+            seed: 1,
+            amount: Some(100.0),
+        },
+    )
+    .unwrap();
+    let merged: HashSet<u32> = v
+        .map
+        .iter()
+        .filter(|r| (r.original as usize) < floor)
+        .map(|r| r.variant)
+        .collect();
+    assert_eq!(
+        merged.len(),
+        2,
+        "the 8 x 8 floor as two triangles: {}",
+        v.note
+    );
     let floor_area: f64 = merged.iter().map(|&t| v.scene.area(t as usize)).sum();
     assert_close(floor_area, 64.0, 1e-12, "floor area");
     // The plate (the object nearest to the floor, at most half its size) in >= 100 pieces.
-    let plate = v.map.iter().filter(|r| r.original as usize == floor || r.original as usize == floor + 1).count();
+    let plate = v
+        .map
+        .iter()
+        .filter(|r| r.original as usize == floor || r.original as usize == floor + 1)
+        .count();
     assert!(plate >= 100, "{plate} plate pieces");
-    assert_eq!(v.map.iter().filter(|r| r.original as usize == floor + 2).count(), 1, "the light is kept");
+    assert_eq!(
+        v.map
+            .iter()
+            .filter(|r| r.original as usize == floor + 2)
+            .count(),
+        1,
+        "the light is kept"
+    );
 }
 
 #[test]
@@ -333,25 +481,76 @@ fn variants_keep_degenerate_triangles_and_materials_without_mtl() {
          f 1 4 3 2\nf 5 6 7 8\nf 9 10 11\n",
     )
     .unwrap();
-    let options = SceneOptions { emit_above: Some(2.0), default_albedo: 0.6, ..SceneOptions::default() };
+    let options = SceneOptions {
+        emit_above: Some(2.0),
+        default_albedo: 0.6,
+        ..SceneOptions::default()
+    };
     let input = load_obj(&obj, &options).unwrap();
     assert_eq!(input.degenerate_count(), 1);
     for kind in VariantKind::ALL {
         let out = dir.path().join(format!("{}.obj", kind.name()));
-        let o = run(&["scene", "variant", kind.name(), s(&obj), "--out", s(&out), "--emit-above", "2"]);
+        let o = run(&[
+            "scene",
+            "variant",
+            kind.name(),
+            s(&obj),
+            "--out",
+            s(&out),
+            "--emit-above",
+            "2",
+        ]);
         assert!(o.status.success(), "{}: {}", kind.name(), stderr(&o));
         // The emitter rule moves with a translated scene.
-        let shifted = SceneOptions { emit_above: Some(2.0 + 1e3), ..options.clone() };
-        let back = load_obj(&out, if kind == VariantKind::Translate { &shifted } else { &options }).unwrap();
-        assert!(back.warnings.is_empty(), "{}: {:?}", kind.name(), back.warnings);
-        let emitting = |s: &Scene| (0..s.len()).filter(|&t| s.is_emitter(t)).map(|t| s.area(t)).sum::<f64>();
+        let shifted = SceneOptions {
+            emit_above: Some(2.0 + 1e3),
+            ..options.clone()
+        };
+        let back = load_obj(
+            &out,
+            if kind == VariantKind::Translate {
+                &shifted
+            } else {
+                &options
+            },
+        )
+        .unwrap();
+        assert!(
+            back.warnings.is_empty(),
+            "{}: {:?}",
+            kind.name(),
+            back.warnings
+        );
+        let emitting = |s: &Scene| {
+            (0..s.len())
+                .filter(|&t| s.is_emitter(t))
+                .map(|t| s.area(t))
+                .sum::<f64>()
+        };
         let factor = if kind == VariantKind::Twins { 2.0 } else { 1.0 };
         // Jitter moves the light's corners by up to 1e-6 (its area by about 1e-6 relative).
-        let tol = if kind == VariantKind::Jitter { 1e-5 } else { 1e-9 };
-        assert_close(emitting(&back), factor * emitting(&input), tol, &format!("{}: emitting area under --emit-above", kind.name()));
-        assert!(back.albedo.iter().all(|a| *a == [0.6; 3]), "{}: --albedo applies", kind.name());
+        let tol = if kind == VariantKind::Jitter {
+            1e-5
+        } else {
+            1e-9
+        };
+        assert_close(
+            emitting(&back),
+            factor * emitting(&input),
+            tol,
+            &format!("{}: emitting area under --emit-above", kind.name()),
+        );
+        assert!(
+            back.albedo.iter().all(|a| *a == [0.6; 3]),
+            "{}: --albedo applies",
+            kind.name()
+        );
         let map = read_map(&map_path(&out)).unwrap();
-        assert!(map.iter().any(|r| r.original == 4), "{}: the degenerate triangle is mapped", kind.name());
+        assert!(
+            map.iter().any(|r| r.original == 4),
+            "{}: the degenerate triangle is mapped",
+            kind.name()
+        );
     }
 }
 
@@ -359,9 +558,22 @@ fn variants_keep_degenerate_triangles_and_materials_without_mtl() {
 fn scene_variant_command_writes_obj_mtl_and_map() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("fan.obj");
-    let o = run(&["scene", "variant", "fan", s(&cornell_path()), "--out", s(&out), "--amount", "3"]);
+    let o = run(&[
+        "scene",
+        "variant",
+        "fan",
+        s(&cornell_path()),
+        "--out",
+        s(&out),
+        "--amount",
+        "3",
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    assert!(stderr(&o).contains("230 triangles from 46"), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("230 triangles from 46"),
+        "{}",
+        stderr(&o)
+    );
     let map_text = std::fs::read_to_string(dir.path().join("fan.map.csv")).unwrap();
     assert_eq!(map_text.lines().next(), Some(MAP_CSV_HEADER));
     assert_eq!(map_text.lines().count(), 231);
@@ -369,7 +581,15 @@ fn scene_variant_command_writes_obj_mtl_and_map() {
     assert!(mtl.contains(&std::fs::read_to_string(cornell_path().with_extension("mtl")).unwrap()));
     // The same files as the library writes.
     let input = cornell();
-    let v = make_variant(&input, VariantKind::Fan, &VariantOptions { seed: 1, amount: Some(3.0) }).unwrap();
+    let v = make_variant(
+        &input,
+        VariantKind::Fan,
+        &VariantOptions {
+            seed: 1,
+            amount: Some(3.0),
+        },
+    )
+    .unwrap();
     assert_eq!(read_map(&map_path(&out)).unwrap(), v.map);
     // Mapping back a result that is its input triangle's index gives the index back.
     let mut b = vec![[0.0; 3]; v.scene.len()];
@@ -407,10 +627,20 @@ fn scene_variant_bad_input_is_one_error_line() {
         let err = stderr(&o);
         assert_eq!(o.status.code(), Some(code), "{args:?}: {err}");
         assert_eq!(err.lines().count(), 1, "{args:?}: {err}");
-        assert!(err.starts_with("error: ") && err.contains(message), "{args:?}: {err}");
+        assert!(
+            err.starts_with("error: ") && err.contains(message),
+            "{args:?}: {err}"
+        );
         assert!(!out.exists() && !map_path(&out).exists() && !out.with_extension("mtl").exists());
     }
-    let o = run(&["scene", "variant", "fan", s(&cb), "--out", s(&dir.path().join("v.mtl"))]);
+    let o = run(&[
+        "scene",
+        "variant",
+        "fan",
+        s(&cb),
+        "--out",
+        s(&dir.path().join("v.mtl")),
+    ]);
     assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
 }
 
@@ -419,14 +649,57 @@ fn scene_variant_bad_input_is_one_error_line() {
 
 fn solve(scene: &Scene) -> Solution {
     let patches = build_patches(scene, None);
-    run_solver(SolverKind::Hierarchical, &patches, &SolverOptions::default(), true)
+    run_solver(
+        SolverKind::Hierarchical,
+        &patches,
+        &SolverOptions::default(),
+        true,
+    )
 }
 
-/// Solves the Cornell box and its variant (written and read back), maps the variant's result
+/// The seed room and the scene options its figures use, or `None` (with a message) when the
+/// meshes are absent.
+fn seed_room() -> Option<(PathBuf, SceneOptions)> {
+    let path =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/meshes/room_radiosity_small.obj");
+    if !path.exists() {
+        eprintln!("skipped: {} is absent", path.display());
+        return None;
+    }
+    let options = SceneOptions {
+        emit_above: Some(3.65),
+        default_albedo: 0.75,
+        ..SceneOptions::default()
+    };
+    Some((path, options))
+}
+
+/// Solves the scene at `path` (loaded with `options`) and its variant (written, read back with
+/// the same options, the emitter rule moved with a translation), maps the variant's result
 /// back; returns (difference per input triangle, variant links / original links).
-fn invariance(kind: VariantKind, amount: Option<f64>) -> (f64, f64) {
+fn invariance_of(
+    path: &Path,
+    options: &SceneOptions,
+    kind: VariantKind,
+    amount: Option<f64>,
+) -> (f64, f64) {
     let dir = tempfile::tempdir().unwrap();
-    let (input, _, back, map) = written(dir.path(), kind, amount);
+    let input = load_obj(path, options).unwrap();
+    let variant = make_variant(&input, kind, &VariantOptions { seed: 1, amount }).unwrap();
+    let out = dir.path().join("variant.obj");
+    write_variant(
+        &variant,
+        &out,
+        &material_text(path).unwrap(),
+        "test variant",
+    )
+    .unwrap();
+    let mut moved = options.clone();
+    if kind == VariantKind::Translate {
+        moved.emit_above = options.emit_above.map(|y| y + amount.unwrap_or(0.0));
+    }
+    let back = load_obj(&out, &moved).unwrap();
+    let map = read_map(&map_path(&out)).unwrap();
     let (original, varied) = (solve(&input), solve(&back));
     let mapped = map_back(&map, input.len(), &varied.triangle_radiance).unwrap();
     let areas: Vec<f64> = (0..input.len()).map(|t| input.area(t)).collect();
@@ -434,7 +707,8 @@ fn invariance(kind: VariantKind, amount: Option<f64>) -> (f64, f64) {
     let error = relative_error(&areas, &emissive, &mapped, &original.triangle_radiance);
     let links = varied.stats.links as f64 / original.stats.links as f64;
     eprintln!(
-        "{} {amount:?}: {} triangles, difference {:.4}%, links {} -> {} ({links:.3}x)",
+        "{} {} {amount:?}: {} triangles, difference {:.4}%, links {} -> {} ({links:.3}x)",
+        path.file_name().unwrap().to_string_lossy(),
         kind.name(),
         back.len(),
         100.0 * error,
@@ -444,24 +718,58 @@ fn invariance(kind: VariantKind, amount: Option<f64>) -> (f64, f64) {
     (error, links)
 }
 
-fn assert_invariant(kind: VariantKind, amount: Option<f64>, max_error: f64, max_links_change: Option<f64>) {
-    let (error, links) = invariance(kind, amount);
-    assert!(
-        error < max_error,
-        "{} {amount:?}: results differ by {:.4}% per input triangle (allowed {}%)",
-        kind.name(),
-        100.0 * error,
-        100.0 * max_error
-    );
-    if let Some(change) = max_links_change {
-        assert!(
-            (links - 1.0).abs() < change,
-            "{} {amount:?}: links changed by {:+.2}% (allowed {}%)",
-            kind.name(),
-            100.0 * (links - 1.0),
-            100.0 * change
-        );
+/// Asserts the difference is under `max_error` and, when given, the links change under
+/// `max_links_change` (relative).
+fn assert_invariant_at(
+    path: &Path,
+    options: &SceneOptions,
+    kind: VariantKind,
+    amount: Option<f64>,
+    max_error: f64,
+    max_links_change: Option<f64>,
+) {
+    let (error, links) = invariance_of(path, options, kind, amount);
+    let what = path.file_name().unwrap().to_string_lossy();
+    let mut failures = Vec::new();
+    if !(error < max_error) {
+        failures.push(format!(
+            "results differ by {:.4}% per input triangle (allowed {}%)",
+            100.0 * error,
+            100.0 * max_error
+        ));
     }
+    if let Some(change) = max_links_change {
+        if !((links - 1.0).abs() < change) {
+            failures.push(format!(
+                "links changed by {:+.2}% (allowed {}%)",
+                100.0 * (links - 1.0),
+                100.0 * change
+            ));
+        }
+    }
+    assert!(
+        failures.is_empty(),
+        "{what} {} {amount:?}: {}",
+        kind.name(),
+        failures.join("; ")
+    );
+}
+
+/// [`assert_invariant_at`] on the Cornell box.
+fn assert_invariant(
+    kind: VariantKind,
+    amount: Option<f64>,
+    max_error: f64,
+    max_links_change: Option<f64>,
+) {
+    assert_invariant_at(
+        &cornell_path(),
+        &SceneOptions::default(),
+        kind,
+        amount,
+        max_error,
+        max_links_change,
+    );
 }
 
 #[test]
@@ -494,6 +802,51 @@ fn solver_invariance_tjunction() {
     assert_invariant(VariantKind::Tjunction, None, 0.01, None);
 }
 
+// The seed room (9,264 triangles, a few seconds per solve) when the meshes are present: its
+// fan and random variants take minutes (docs/mesh_quality.md), so only the moves are here.
+
+#[test]
+fn solver_invariance_seed_room_translate_1e3() {
+    if let Some((path, options)) = seed_room() {
+        assert_invariant_at(
+            &path,
+            &options,
+            VariantKind::Translate,
+            Some(1e3),
+            0.005,
+            Some(0.05),
+        );
+    }
+}
+
+#[test]
+fn solver_invariance_seed_room_translate_1e5() {
+    if let Some((path, options)) = seed_room() {
+        assert_invariant_at(
+            &path,
+            &options,
+            VariantKind::Translate,
+            Some(1e5),
+            0.005,
+            Some(0.05),
+        );
+    }
+}
+
+#[test]
+fn solver_invariance_seed_room_jitter_1e_6() {
+    if let Some((path, options)) = seed_room() {
+        assert_invariant_at(
+            &path,
+            &options,
+            VariantKind::Jitter,
+            Some(1e-6),
+            0.005,
+            Some(0.05),
+        );
+    }
+}
+
 // ---------------------------------------------------------------------------------------------
 // Generated interiors
 
@@ -503,36 +856,61 @@ fn cos_sin_turn_matches_the_standard_library() {
         for i in 0..n {
             let (c, s) = cos_sin_turn(i, n);
             let theta = std::f64::consts::TAU * i as f64 / n as f64;
-            assert!((c - theta.cos()).abs() < 1e-15 && (s - theta.sin()).abs() < 1e-15, "{i}/{n}: {c} {s}");
+            assert!(
+                (c - theta.cos()).abs() < 1e-15 && (s - theta.sin()).abs() < 1e-15,
+                "{i}/{n}: {c} {s}"
+            );
         }
     }
 }
 
-fn check_interior(what: &str, interior: &interiors::Interior, range: std::ops::RangeInclusive<usize>) {
+fn check_interior(
+    what: &str,
+    interior: &interiors::Interior,
+    range: std::ops::RangeInclusive<usize>,
+) {
     let scene = &interior.scene;
-    assert!(range.contains(&scene.len()), "{what}: {} triangles outside {range:?}", scene.len());
+    assert!(
+        range.contains(&scene.len()),
+        "{what}: {} triangles outside {range:?}",
+        scene.len()
+    );
     assert_eq!(scene.degenerate_count(), 0, "{what}: every fan is valid");
-    assert!(scene.duplicates().iter().all(Option::is_none), "{what}: no repeated triangle");
+    assert!(
+        scene.duplicates().iter().all(Option::is_none),
+        "{what}: no repeated triangle"
+    );
     assert!(scene.emitter_count() > 0, "{what}: emitters");
     let share = interior.reversed_polygons as f64 / interior.polygons as f64;
-    assert!((share - REVERSED_SHARE).abs() < 0.05, "{what}: {share} of the polygons reversed");
+    assert!(
+        (share - REVERSED_SHARE).abs() < 0.05,
+        "{what}: {share} of the polygons reversed"
+    );
     assert_eq!(interior.reversed.len(), scene.len());
     for t in (0..scene.len()).filter(|&t| scene.is_emitter(t)) {
         assert!(!interior.reversed[t], "{what}: emitter {t} reversed");
     }
     // The floor: its triangles face up unless their polygon was reversed.
-    let floor: Vec<usize> = (0..scene.len()).filter(|&t| scene.material_name(t) == Some("floor")).collect();
+    let floor: Vec<usize> = (0..scene.len())
+        .filter(|&t| scene.material_name(t) == Some("floor"))
+        .collect();
     assert!(!floor.is_empty());
     for &t in &floor {
         assert!(scene.corners(t).iter().all(|p| p.y == 0.0));
-        assert_eq!(normal(scene, t).y < 0.0, interior.reversed[t], "{what}: floor triangle {t}");
+        assert_eq!(
+            normal(scene, t).y < 0.0,
+            interior.reversed[t],
+            "{what}: floor triangle {t}"
+        );
     }
     assert!(
         interior.reversed.iter().any(|&r| r) && interior.reversed.iter().any(|&r| !r),
         "{what}: some polygons reversed, not all"
     );
     // Slivers, as CAD exports have: the walls' fans.
-    let worst = (0..scene.len()).map(|t| aspect_ratio(&scene.corners(t))).fold(0.0, f64::max);
+    let worst = (0..scene.len())
+        .map(|t| aspect_ratio(&scene.corners(t)))
+        .fold(0.0, f64::max);
     assert!(worst > 100.0, "{what}: largest aspect ratio {worst}");
     // Written and read back: the lights are Ke, so default options light the scene.
     let dir = tempfile::tempdir().unwrap();
@@ -549,8 +927,14 @@ fn classroom_is_in_range_lit_and_partly_reversed() {
     let room = classroom(1);
     check_interior("classroom", &room, CLASSROOM_TRIANGLES);
     assert!((8_000..=12_000).contains(&room.scene.len()));
-    let tubes = (0..room.scene.len()).filter(|&t| room.scene.material_name(t) == Some("tube")).count();
-    assert_eq!(tubes, 12 * (2 * 16 + 2 * 14), "twelve 16-sided tubes with caps");
+    let tubes = (0..room.scene.len())
+        .filter(|&t| room.scene.material_name(t) == Some("tube"))
+        .count();
+    assert_eq!(
+        tubes,
+        12 * (2 * 16 + 2 * 14),
+        "twelve 16-sided tubes with caps"
+    );
     for seed in [2, 3] {
         check_interior("classroom", &classroom(seed), CLASSROOM_TRIANGLES);
     }
@@ -560,10 +944,20 @@ fn classroom_is_in_range_lit_and_partly_reversed() {
 fn office_is_in_range_lit_and_partly_reversed() {
     let room = office(1);
     check_interior("office", &room, OFFICE_TRIANGLES);
-    let slats = (0..room.scene.len()).filter(|&t| room.scene.material_name(t) == Some("slat")).count();
-    assert_eq!(slats, (66 + 2) * 12, "66 slats and two rails, boxes of 12 triangles");
+    let slats = (0..room.scene.len())
+        .filter(|&t| room.scene.material_name(t) == Some("slat"))
+        .count();
+    assert_eq!(
+        slats,
+        (66 + 2) * 12,
+        "66 slats and two rails, boxes of 12 triangles"
+    );
     for name in ["sky", "bulb"] {
-        assert!((0..room.scene.len()).any(|t| room.scene.material_name(t) == Some(name) && room.scene.is_emitter(t)), "{name} emits");
+        assert!(
+            (0..room.scene.len())
+                .any(|t| room.scene.material_name(t) == Some(name) && room.scene.is_emitter(t)),
+            "{name} emits"
+        );
     }
     for seed in [2, 3] {
         check_interior("office", &office(seed), OFFICE_TRIANGLES);
@@ -582,16 +976,31 @@ fn classroom_and_office_are_deterministic() {
             let o = run(&["scene", what, "--seed", seed, "--out", s(&out), "--quiet"]);
             assert!(o.status.success(), "{what}: {}", stderr(&o));
             assert!(stderr(&o).is_empty());
-            (std::fs::read(&out).unwrap(), std::fs::read(out.with_extension("mtl")).unwrap())
+            (
+                std::fs::read(&out).unwrap(),
+                std::fs::read(out.with_extension("mtl")).unwrap(),
+            )
         };
         let (a, b, c) = (file("a", "7"), file("b", "7"), file("c", "8"));
         assert!(a == b, "{what}: the same seed gives the same files");
         assert!(a.0 != c.0, "{what}: another seed reverses other polygons");
-        let loaded = load_obj(&dir.path().join("a").join(format!("{what}.obj")), &SceneOptions::default()).unwrap();
-        let generated = if what == "classroom" { classroom(7) } else { office(7) };
+        let loaded = load_obj(
+            &dir.path().join("a").join(format!("{what}.obj")),
+            &SceneOptions::default(),
+        )
+        .unwrap();
+        let generated = if what == "classroom" {
+            classroom(7)
+        } else {
+            office(7)
+        };
         assert_eq!(loaded.len(), generated.scene.len());
         for t in 0..loaded.len() {
-            assert_eq!(loaded.corners(t), generated.scene.corners(t), "{what}: corners of {t}");
+            assert_eq!(
+                loaded.corners(t),
+                generated.scene.corners(t),
+                "{what}: corners of {t}"
+            );
         }
     }
 }
