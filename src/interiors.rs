@@ -126,7 +126,7 @@ impl Cad {
             material: Vec::new(),
             reversed: Vec::new(),
             materials: Vec::new(),
-            rng: Rng::new(seed, 0x1a7e_0f_ca_d),
+            rng: Rng::new(seed, 0x1_a7e0_fcad),
             polygons: 0,
             reversed_polygons: 0,
         }

@@ -174,6 +174,9 @@ fn key(p: DVec3) -> [u64; 3] {
     p.to_array().map(|x| (x + 0.0).to_bits())
 }
 
+/// An undirected edge by the keys of its two ends, the lower first.
+type EdgeKey = ([u64; 3], [u64; 3]);
+
 /// Area of a triangle given by its corners.
 pub fn triangle_area(t: &[DVec3; 3]) -> f64 {
     0.5 * (t[1] - t[0]).cross(t[2] - t[0]).length()
@@ -527,11 +530,11 @@ fn fan(scene: &Scene, k: usize) -> Out {
 /// pairs on it; edge `e` of a triangle runs from corner `e` to corner `e + 1`. `order` lists the
 /// edges in order of first appearance (triangle order, then edge order).
 struct Edges {
-    on: HashMap<([u64; 3], [u64; 3]), Vec<(usize, usize)>>,
-    order: Vec<([u64; 3], [u64; 3])>,
+    on: HashMap<EdgeKey, Vec<(usize, usize)>>,
+    order: Vec<EdgeKey>,
 }
 
-fn edge_key(a: DVec3, b: DVec3) -> ([u64; 3], [u64; 3]) {
+fn edge_key(a: DVec3, b: DVec3) -> EdgeKey {
     let (ka, kb) = (key(a), key(b));
     if ka <= kb {
         (ka, kb)
@@ -572,6 +575,10 @@ fn on_edge(lo: DVec3, hi: DVec3, s: f64) -> DVec3 {
 /// `e + 1`, and its position.
 type EdgePoint = (f64, DVec3);
 
+/// A vertex of a triangle being split: barycentric weights of corners 1 and 2, position, and
+/// (edge, parameter) when it was added on an edge.
+type LocalVertex = (DVec2, DVec3, Option<(usize, f64)>);
+
 /// Splits triangle `corners` by inserting `edge_points[e]` (points on its edges, see
 /// [`EdgePoint`]) and then the interior points `interior` (barycentric weights of corners 1 and
 /// 2), one at a time: an edge point splits the triangle on its piece of the edge in two, an
@@ -590,11 +597,10 @@ fn split_triangle(
         DVec2::new(1.0, 0.0),
         DVec2::new(0.0, 1.0),
     ];
-    let mut local: Vec<(DVec2, DVec3, Option<(usize, f64)>)> =
-        (0..3).map(|i| (unit[i], corners[i], None)).collect();
+    let mut local: Vec<LocalVertex> = (0..3).map(|i| (unit[i], corners[i], None)).collect();
     let mut tris: Vec<[usize; 3]> = vec![[0, 1, 2]];
     // Parameter of local vertex `v` along edge `e`, when it lies on it.
-    let param = |local: &[(DVec2, DVec3, Option<(usize, f64)>)], v: usize, e: usize| {
+    let param = |local: &[LocalVertex], v: usize, e: usize| {
         if v < 3 {
             if v == e {
                 Some(0.0)
@@ -660,7 +666,7 @@ fn split_triangle(
 fn edge_points_of(
     scene: &Scene,
     t: usize,
-    points: &HashMap<([u64; 3], [u64; 3]), Vec<(usize, f64)>>,
+    points: &HashMap<EdgeKey, Vec<(usize, f64)>>,
 ) -> [Vec<EdgePoint>; 3] {
     let c = scene.corners(t);
     std::array::from_fn(|e| {
@@ -689,7 +695,7 @@ fn edge_points_of(
 /// points per triangle.
 fn random(scene: &Scene, points: usize, seed: u64) -> Out {
     let edges = Edges::of(scene, true);
-    let mut on: HashMap<([u64; 3], [u64; 3]), Vec<(usize, f64)>> = HashMap::new();
+    let mut on: HashMap<EdgeKey, Vec<(usize, f64)>> = HashMap::new();
     for (i, k) in edges.order.iter().enumerate() {
         let mut rng = Rng::new(seed ^ 0x5eed_ed6e, i as u64);
         let count = rng.below(3) as usize;
@@ -724,7 +730,7 @@ fn random(scene: &Scene, points: usize, seed: u64) -> Out {
 /// `tjunction`: a share of the edges shared by exactly two triangles gets a point on one side.
 fn tjunction(scene: &Scene, share: f64, seed: u64) -> Out {
     let edges = Edges::of(scene, true);
-    let mut on: HashMap<([u64; 3], [u64; 3]), Vec<(usize, f64)>> = HashMap::new();
+    let mut on: HashMap<EdgeKey, Vec<(usize, f64)>> = HashMap::new();
     for (i, k) in edges.order.iter().enumerate() {
         let sides = &edges.on[k];
         if sides.len() != 2 {
@@ -900,7 +906,7 @@ fn flat_area(t: &[DVec2; 3]) -> f64 {
 /// not a simple polygon (holes, touching loops, inconsistent orientation) or the new
 /// triangles do not cover exactly its area.
 fn merge_region(scene: &Scene, region: &[usize], frame: &PlaneFrame) -> Option<Merged> {
-    let mut directed: HashMap<([u64; 3], [u64; 3]), usize> = HashMap::new();
+    let mut directed: HashMap<EdgeKey, usize> = HashMap::new();
     let mut position: HashMap<[u64; 3], DVec3> = HashMap::new();
     for &t in region {
         let c = scene.corners(t);
@@ -1223,8 +1229,8 @@ fn huge_tiny(scene: &Scene, tiny: usize) -> Result<(Out, String)> {
 
     let mut out = Out::default();
     let mut region_done = false;
-    for t in 0..n {
-        if in_region[t] {
+    for (t, &in_region) in in_region.iter().enumerate() {
+        if in_region {
             if !region_done {
                 region_done = true;
                 for (m, tri) in merged.tris.iter().enumerate() {
