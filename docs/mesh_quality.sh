@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Mesh-quality battery: solves badly triangulated variants of the same scenes and compares each
+# Mesh quality: solves badly triangulated variants of the same scenes and compares each
 # with the well-meshed original, per original triangle.
 #
 #     cargo build --release && docs/mesh_quality.sh [OUT_DIR]
@@ -17,7 +17,7 @@
 # non-emissive triangles). Progress goes to stderr.
 #
 # Each solve runs under `timeout`; one that times out, fails or runs out of its memory limit
-# gives a row saying so ("timed out", "failed: <error line>") and the battery goes on.
+# gives a row saying so ("timed out", "failed: <error line>") and the script goes on.
 #
 # Environment:
 #   ANTIRADIANCE  the binary (default target/release/antiradiance)
@@ -38,7 +38,7 @@ ROOM=${ROOM:-../shared/meshes/room_radiosity_small.obj}
 SCENES=${SCENES:-room cornell}
 VARIANTS=${VARIANTS:-fan random jitter translate:1e3 translate:1e5 twins tjunction huge-tiny}
 OUT=${1:-mesh_quality}
-HELPER=docs/mesh_quality.py
+TABULATE=docs/mesh_quality.py
 
 if [ ! -x "$BIN" ]; then
     echo "error: $BIN: not found; build it first (cargo build --release)" >&2
@@ -126,4 +126,4 @@ for scene in $SCENES; do
     done
 done
 
-python3 "$HELPER" table "$RUNS"
+python3 "$TABULATE" table "$RUNS"

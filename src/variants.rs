@@ -886,8 +886,8 @@ struct PlaneFrame {
 
 impl PlaneFrame {
     fn new(origin: DVec3, n: DVec3) -> PlaneFrame {
-        let helper = if n.x.abs() < 0.6 { DVec3::X } else { DVec3::Y };
-        let u = helper.cross(n).normalize();
+        let across = if n.x.abs() < 0.6 { DVec3::X } else { DVec3::Y };
+        let u = across.cross(n).normalize();
         let v = n.cross(u);
         PlaneFrame { origin, u, v }
     }

@@ -1,4 +1,4 @@
-//! The mesh-quality battery: the variant writers (`antiradiance scene variant`,
+//! Mesh quality: the variant writers (`antiradiance scene variant`,
 //! `antiradiance::variants`), the solver's invariance under re-triangulation, and the generated
 //! CAD-like interiors (`antiradiance scene classroom` / `office`, `antiradiance::interiors`).
 //!
