@@ -17,6 +17,7 @@ pub mod error;
 pub mod geometry;
 pub mod hierarchical;
 pub mod hierarchy;
+pub mod interiors;
 pub mod links;
 pub mod memory;
 pub mod mesh;
@@ -35,5 +36,6 @@ pub mod solve;
 pub mod stage;
 pub mod sweep;
 pub mod transport;
+pub mod variants;
 
 pub use error::{Error, Result};

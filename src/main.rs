@@ -29,7 +29,8 @@ enum Command {
     /// Measure time and error against the path tracer over a grid of solver knobs.
     Sweep(antiradiance::sweep::SweepArgs),
     /// Write a generated scene (OBJ + MTL): the Cornell box, a mesh in a closed room, a mesh
-    /// under an area light.
+    /// under an area light, a badly triangulated variant of a mesh, a CAD-like classroom or
+    /// office.
     Scene(antiradiance::stage::StageArgs),
 }
 

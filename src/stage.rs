@@ -2,9 +2,14 @@
 //! documentation was measured on can be made again by a user.
 //!
 //! The geometry is built by [`crate::scenes`] ([`scenes::cornell_box`],
-//! [`scenes::subdivided_cornell_box`], [`scenes::in_room`], [`scenes::under_light`]) and written
-//! by [`scenes::write_obj`] (atomic, MTL file next to the OBJ file). Every light is a material
-//! with `Ke`, so the written scenes solve with default options (no `--emit-above`).
+//! [`scenes::subdivided_cornell_box`], [`scenes::in_room`], [`scenes::under_light`]) and
+//! [`crate::interiors`] ([`interiors::classroom`], [`interiors::office`]) and written by
+//! [`scenes::write_obj`] (atomic, MTL file next to the OBJ file). Every light is a material with
+//! `Ke`, so the written scenes solve with default options (no `--emit-above`).
+//!
+//! `scene variant` writes a mesh's geometry triangulated badly ([`variants::make_variant`],
+//! [`variants::write_variant`]), with the mesh's own materials and a map back to its
+//! triangles; the scene options that applied to the mesh apply to the variant.
 //!
 //! As in the other commands, every parameter and the output path are checked before the mesh is
 //! loaded, a bad mesh gives the loader's one-line `file:line: message` error, and nothing is
@@ -16,8 +21,10 @@ use clap::{Args, Subcommand};
 
 use crate::driver::{check_outputs, one_line, MAX_PATCHES};
 use crate::error::{Error, Result};
+use crate::interiors;
 use crate::scene::{self, Scene, SceneOptions};
 use crate::scenes;
+use crate::variants::{self, VariantKind, VariantOptions};
 
 /// Arguments of `antiradiance scene`.
 #[derive(Args, Clone, Debug)]
@@ -39,6 +46,16 @@ pub enum StageKind {
     /// A mesh as it is, with a rectangular area light above it facing down (half the mesh's
     /// footprint, 1.5 times its height above its top); the mesh's triangles come first.
     UnderLight(MeshArgs),
+    /// The mesh's geometry triangulated badly (slivers, random, jittered, translated, back to
+    /// back twins, T-junctions, huge beside tiny), with a map back to its triangles
+    /// (OUT.map.csv); materials kept by name, the MTL file copied.
+    Variant(VariantArgs),
+    /// A CAD-like classroom (about 10k triangles): fan-triangulated walls with window openings,
+    /// rows of desks and chairs, tube lights, 30% of the polygons reversed.
+    Classroom(InteriorArgs),
+    /// A CAD-like office: a window with an emissive sky pane behind Venetian blinds, a desk, a
+    /// lamp, a bookshelf, large wall polygons beside small objects, 30% of the polygons reversed.
+    Office(InteriorArgs),
 }
 
 /// The output file of every scene kind.
@@ -86,6 +103,61 @@ pub struct MeshArgs {
         allow_negative_numbers = true
     )]
     pub light_radiance: f64,
+    /// The output file.
+    #[command(flatten)]
+    pub out: OutArgs,
+}
+
+/// Arguments of `antiradiance scene variant`.
+#[derive(Args, Clone, Debug)]
+pub struct VariantArgs {
+    /// The kind of bad triangulation.
+    #[arg(value_enum, value_name = "KIND")]
+    pub kind: VariantKind,
+    /// The mesh: Wavefront OBJ, materials from the MTL files it names (copied to the output).
+    #[arg(value_name = "MESH.obj")]
+    pub mesh: PathBuf,
+    /// Seed of the random choices (random, jitter, tjunction).
+    #[arg(long, value_name = "S", default_value_t = 1)]
+    pub seed: u64,
+    /// The kind's amount: fan slivers per triangle k (8), random interior points per
+    /// triangle (3), jitter distance (1e-6), translation per axis (1e3), tjunction share of
+    /// shared edges (0.3), huge-tiny tiny triangles (4000); twins takes none.
+    #[arg(long, value_name = "X", allow_negative_numbers = true)]
+    pub amount: Option<f64>,
+    /// Grey albedo in [0, 1) for triangles whose material has no Kd (as for solve; it decides
+    /// which triangles are the same material for huge-tiny; the output keeps the mesh's
+    /// materials).
+    #[arg(
+        long,
+        value_name = "A",
+        default_value_t = 0.75,
+        allow_negative_numbers = true
+    )]
+    pub albedo: f64,
+    /// As for solve: triangles with all three vertices above Y emit (used only to tell
+    /// materials apart; pass it again when solving the output).
+    #[arg(long, value_name = "Y", allow_negative_numbers = true)]
+    pub emit_above: Option<f64>,
+    /// As for solve: the radiance of the --emit-above emitters.
+    #[arg(
+        long,
+        value_name = "L",
+        default_value_t = 1.0,
+        allow_negative_numbers = true
+    )]
+    pub emission: f64,
+    /// The output file; the map goes next to it (same name, extension .map.csv).
+    #[command(flatten)]
+    pub out: OutArgs,
+}
+
+/// Arguments of `antiradiance scene classroom` and `office`.
+#[derive(Args, Clone, Debug)]
+pub struct InteriorArgs {
+    /// Seed of the reversed polygons and a few placements; the same seed gives the same file.
+    #[arg(long, value_name = "S", default_value_t = 1)]
+    pub seed: u64,
     /// The output file.
     #[command(flatten)]
     pub out: OutArgs,
@@ -190,7 +262,104 @@ pub fn stage(args: &StageArgs) -> Result<()> {
             );
             write(&scene, &a.out, &title, &note)
         }
+        StageKind::Variant(a) => variant(a),
+        StageKind::Classroom(a) | StageKind::Office(a) => {
+            check_out(&a.out.out, None)?;
+            let (interior, what) = if matches!(args.kind, StageKind::Classroom(_)) {
+                (interiors::classroom(a.seed), "classroom")
+            } else {
+                (interiors::office(a.seed), "office")
+            };
+            let title = format!(
+                "CAD-like {what} (m, y up), generated by `antiradiance scene {what} --seed {}` \
+                 (antiradiance::interiors::{what})\n\
+                 {} polygons fan-triangulated from their first vertex, {} of them reversed",
+                a.seed, interior.polygons, interior.reversed_polygons
+            );
+            let note = format!(
+                " ({} polygons, {} reversed)",
+                interior.polygons, interior.reversed_polygons
+            );
+            write(&interior.scene, &a.out, &title, &note)
+        }
     }
+}
+
+/// `antiradiance scene variant`: checks the arguments, loads the mesh, builds the variant and
+/// writes it with its map and the mesh's materials.
+fn variant(a: &VariantArgs) -> Result<()> {
+    let options = SceneOptions {
+        default_albedo: a.albedo,
+        emit_above: a.emit_above,
+        emission: a.emission,
+    };
+    options.validate()?;
+    let out = &a.out.out;
+    let map = variants::map_path(out);
+    check_out(out, Some(&a.mesh))?;
+    check_outputs(&[("--out's map file", &map)], &a.mesh)?;
+    let variant_options = VariantOptions {
+        seed: a.seed,
+        amount: a.amount,
+    };
+    variants::resolve_amount(a.kind, a.amount)?;
+    let scene = scene::load_obj(&a.mesh, &options)?;
+    // The mesh may well be lit by --emit-above only when it is solved.
+    for w in scene
+        .warnings
+        .iter()
+        .filter(|w| !w.contains("no emitting triangle"))
+    {
+        eprintln!("warning: {}", one_line(w));
+    }
+    // The output's MTL file must not replace one the mesh reads.
+    let out_mtl = out.with_extension("mtl");
+    let same = |p: &Path| match (p.canonicalize(), out_mtl.canonicalize()) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    };
+    if let Some(p) = variants::material_files(&a.mesh)?.iter().find(|p| same(p)) {
+        return Err(Error::Io {
+            path: out_mtl.clone(),
+            message: format!(
+                "--out's MTL file would overwrite {}, a material file of the mesh",
+                p.display()
+            ),
+        });
+    }
+    let mtl = variants::material_text(&a.mesh)?;
+    let variant = variants::make_variant(&scene, a.kind, &variant_options)?;
+    let title = format!(
+        "{} as the {} variant, generated by `antiradiance scene variant {} --seed {}{}` \
+         (antiradiance {})\n{}\n\
+         every triangle's input triangles: {}",
+        display_name(&a.mesh),
+        a.kind.name(),
+        a.kind.name(),
+        a.seed,
+        variant
+            .amount
+            .map(|x| format!(" --amount {x}"))
+            .unwrap_or_default(),
+        env!("CARGO_PKG_VERSION"),
+        variant.note,
+        map.file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default(),
+    );
+    variants::write_variant(&variant, out, &mtl, &title)?;
+    if !a.out.quiet {
+        eprintln!(
+            "wrote {}, {} and {}: {} triangles from {} ({})",
+            out.display(),
+            out.with_extension("mtl").display(),
+            map.display(),
+            variant.scene.len(),
+            scene.len(),
+            variant.note
+        );
+    }
+    Ok(())
 }
 
 /// The mesh's file name, for titles (the same whatever directory the command ran from).

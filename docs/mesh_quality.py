@@ -1,0 +1,194 @@
+#!/usr/bin/env python3
+"""Maps mesh-quality variants' results back to the original triangles and tabulates them.
+
+Python 3 standard library only. Used by docs/mesh_quality.sh; also usable on its own:
+
+    mesh_quality.py error ORIGINAL.csv VARIANT.csv VARIANT.map.csv
+        prints the variant's difference from the original: the design note's error measure
+        (area-weighted relative L1 over the original's non-emissive triangles, mean over the
+        RGB channels whose original is not all zero), after mapping the variant's per-triangle
+        radiance back to the original triangles through the map.
+
+    mesh_quality.py table RUNS.tsv
+        prints one markdown table of the runs listed in RUNS.tsv (tab-separated, no header:
+        scene, variant, status, variant OBJ, report JSON, triangles CSV, map CSV or "-"); the
+        first run of each scene named "original" is the reference for its ratios and
+        differences.
+
+CSV formats: triangles `index,area,emissive,r,g,b` (`antiradiance solve --triangles`), map
+`variant_index,original_index,area,facing` (`antiradiance scene variant`). A variant
+triangle's result counts for an original triangle with the weight of the original's area it
+covers, on the side the original faces (facing 1; the reversed twins, facing -1, do not count).
+"""
+
+import csv
+import json
+import sys
+
+
+def read_triangles(path):
+    """Rows of a triangles CSV as (area, emissive, (r, g, b)), in index order."""
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    out = []
+    for i, row in enumerate(rows):
+        if int(row["index"]) != i:
+            raise ValueError(f"{path}: row {i + 2}: index {row['index']} out of order")
+        out.append(
+            (
+                float(row["area"]),
+                row["emissive"].strip() == "1",
+                (float(row["r"]), float(row["g"]), float(row["b"])),
+            )
+        )
+    return out
+
+
+def read_map(path):
+    """Rows of a map CSV as (variant, original, area, same_side)."""
+    with open(path, newline="") as f:
+        reader = csv.reader(f)
+        header = next(reader)
+        if [h.strip() for h in header] != ["variant_index", "original_index", "area", "facing"]:
+            raise ValueError(f"{path}: unexpected header {header}")
+        return [
+            (int(v), int(o), float(a), int(s) == 1)
+            for v, o, a, s in (r for r in reader if r)
+        ]
+
+
+def map_back(mapping, originals, variant):
+    """Per original triangle, the area-weighted mean of the variant's radiance over the variant
+    triangles covering it on its own side (plain mean when their areas sum to 0)."""
+    weighted = [[0.0, 0.0, 0.0] for _ in range(originals)]
+    plain = [[0.0, 0.0, 0.0] for _ in range(originals)]
+    area = [0.0] * originals
+    count = [0] * originals
+    for v, o, a, same_side in mapping:
+        if not same_side:
+            continue
+        b = variant[v][2]
+        for c in range(3):
+            weighted[o][c] += a * b[c]
+            plain[o][c] += b[c]
+        area[o] += a
+        count[o] += 1
+    out = []
+    for o in range(originals):
+        if area[o] > 0:
+            out.append(tuple(x / area[o] for x in weighted[o]))
+        elif count[o] > 0:
+            out.append(tuple(x / count[o] for x in plain[o]))
+        else:
+            out.append((0.0, 0.0, 0.0))
+    return out
+
+
+def relative_error(original, estimate):
+    """The design note's error of `estimate` (per original triangle) against `original`."""
+    total, channels = 0.0, 0
+    for c in range(3):
+        num = den = 0.0
+        for (a, emissive, b), e in zip(original, estimate):
+            if emissive:
+                continue
+            num += a * abs(e[c] - b[c])
+            den += a * b[c]
+        if den > 0:
+            total += num / den
+            channels += 1
+    return total / channels if channels else 0.0
+
+
+def difference(original_csv, variant_csv, map_csv):
+    """The variant's difference from the original, mapped back through `map_csv`."""
+    original = read_triangles(original_csv)
+    variant = read_triangles(variant_csv)
+    mapping = read_map(map_csv)
+    return relative_error(original, map_back(mapping, len(original), variant))
+
+
+def count_faces(obj):
+    """Triangles of an OBJ file after fan triangulation."""
+    n = 0
+    try:
+        with open(obj) as f:
+            for line in f:
+                words = line.split("#")[0].split()
+                if words and words[0] == "f":
+                    n += len(words) - 3
+    except OSError:
+        return None
+    return n
+
+
+def fmt(x, digits=3):
+    """A number with `digits` significant digits, plain for moderate magnitudes."""
+    if x is None:
+        return "-"
+    if x == 0:
+        return "0"
+    if 1e-3 <= abs(x) < 1e6:
+        return f"{x:.{digits}g}"
+    return f"{x:.{digits - 1}e}"
+
+
+def table(runs_tsv):
+    """One markdown table of the runs in `runs_tsv`."""
+    rows = []
+    with open(runs_tsv) as f:
+        for line in f:
+            if line.strip():
+                rows.append(line.rstrip("\n").split("\t"))
+    print(
+        "| scene | variant | input triangles | time (s) | links | links / input triangle "
+        "| time ratio | links ratio | peak memory (MB) | difference from original |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    base = {}
+    for scene, variant, status, obj, report, triangles, mapping in rows:
+        n = count_faces(obj)
+        if status != "ok":
+            print(f"| {scene} | {variant} | {n if n is not None else '-'} | {status} | | | | | | |")
+            continue
+        with open(report) as f:
+            r = json.load(f)
+        n = r["counts"]["input_triangles"]
+        t = r["time_seconds"]["total"]
+        links = r["stats"]["links"]
+        peak = r.get("peak_memory_bytes")
+        if variant == "original" and scene not in base:
+            base[scene] = (t, links, triangles)
+        ref = base.get(scene)
+        if ref is None:
+            ratios, diff = ("-", "-"), "-"
+        else:
+            ratios = (fmt(t / ref[0]) if ref[0] > 0 else "-", fmt(links / ref[1]) if ref[1] else "-")
+            if variant == "original":
+                diff = "0"
+            elif mapping == "-":
+                diff = "-"
+            else:
+                try:
+                    diff = f"{100 * difference(ref[2], triangles, mapping):.3f}%"
+                except (OSError, ValueError, IndexError, KeyError) as e:
+                    diff = f"failed: {e}"
+        print(
+            f"| {scene} | {variant} | {n} | {fmt(t)} | {links} | {fmt(links / n)} | "
+            f"{ratios[0]} | {ratios[1]} | {fmt(peak / 1e6) if peak else '-'} | {diff} |"
+        )
+
+
+def main(argv):
+    if len(argv) == 5 and argv[1] == "error":
+        print(f"{difference(argv[2], argv[3], argv[4]):.6g}")
+    elif len(argv) == 3 and argv[1] == "table":
+        table(argv[2])
+    else:
+        sys.stderr.write(__doc__)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv))
