@@ -522,27 +522,29 @@ impl ClusterTree {
         node.plane = plane;
     }
 
-    /// Splits leaf `i` in two at the midpoint of its longest edge (new leaves, same patch,
-    /// same orientation) and returns the first child. Ancestors' bounds do not change (the
-    /// pieces cover the same triangle).
+    /// Splits leaf `i` into four by two rounds of longest-edge bisection (new leaves, same
+    /// patch, same orientation) and returns the first child. Ancestors' bounds do not change
+    /// (the pieces cover the same triangle).
     ///
     /// Longest-edge bisection turns a sliver into well-shaped pieces (each cut halves the
     /// longest edge, and the pieces' smallest angles stay bounded below by half the
-    /// triangle's), where midpoint 4-splits keep a sliver a sliver at every level.
+    /// triangle's), where midpoint 4-splits keep a sliver a sliver at every level. Four pieces
+    /// per split, as the midpoint split had: with two, on-demand splits stopped at half the
+    /// elements (Cornell box 184 -> 96 elements, error 1.70% -> 2.20%).
     pub fn split_leaf(&mut self, i: u32) -> u32 {
         let node = &self.nodes[i as usize];
         debug_assert!(node.is_leaf());
         let (patch, depth, corners) = (node.patch, node.split_depth, node.corners);
         let blocks_back = node.blocks_back;
         let first = self.nodes.len() as u32;
-        for piece in geometry::bisect(&corners) {
+        for piece in geometry::bisect(&corners).iter().flat_map(geometry::bisect) {
             let mut leaf = leaf_node(piece, patch, i, depth + 1);
             leaf.blocks_back = blocks_back;
             self.nodes.push(leaf);
         }
         let node = &mut self.nodes[i as usize];
         node.first_child = first;
-        node.child_count = 2;
+        node.child_count = 4;
         first
     }
 

@@ -20,8 +20,8 @@ pub struct LinkParams {
     /// bear's graded mesh into twice its triangles for no measurable accuracy: 5.1M links,
     /// error 6.19%; 0.02: 3.25M links, same error, same room and Cornell box errors).
     pub min_radius: f64,
-    /// Most times one patch may be split in four: it is halved across its longest edge up to
-    /// twice this many times (at most 4^depth pieces). 0..6; 4 by default (256 pieces).
+    /// Most times one patch may be split in four (two rounds of longest-edge bisection). 0..6;
+    /// 4 by default (256 pieces).
     pub max_split_depth: u8,
     /// How much larger than the sender's the receiver's solid angle may be: receivers evaluate a
     /// link with each element's own direction and distance, so their extent costs little
@@ -362,7 +362,7 @@ impl Traversal<'_> {
         // under a small object), above the resolution floor, never among similar neighbours.
         let leaf_splittable = |n: &crate::hierarchy::Node, other: &crate::hierarchy::Node| {
             params.epsilon > 0.0
-                && n.split_depth < 2 * params.max_split_depth
+                && n.split_depth < params.max_split_depth
                 && n.radius > params.min_radius
                 && n.radius > 2.0 * other.radius
                 && n.radius > gap.max(0.0)
@@ -451,7 +451,7 @@ const PARALLEL_PAIRS: usize = 16384;
 /// The traversal runs in rounds: each walks its node pairs in parallel over a read-only tree,
 /// deferring the pairs that need a leaf triangle split; between rounds those leaves are split
 /// (in a fixed order) and the deferred pairs continue below them. At most
-/// `2 * max_split_depth + 1` rounds (each split halves a leaf).
+/// `max_split_depth + 1` rounds.
 pub fn refine(
     tree: &mut ClusterTree,
     bins: &Bins,

@@ -792,17 +792,71 @@ fn solver_invariance_jitter_1e_6() {
 
 #[test]
 fn solver_invariance_fan() {
-    assert_invariant(VariantKind::Fan, None, 0.01, None);
+    assert_as_accurate(VariantKind::Fan);
 }
 
 #[test]
 fn solver_invariance_random() {
-    assert_invariant(VariantKind::Random, None, 0.01, None);
+    assert_as_accurate(VariantKind::Random);
 }
 
 #[test]
 fn solver_invariance_tjunction() {
-    assert_invariant(VariantKind::Tjunction, None, 0.01, None);
+    assert_as_accurate(VariantKind::Tjunction);
+}
+
+/// A re-triangulation of the Cornell box is solved as accurately as the original: its error
+/// against the path tracer (per input triangle, mapped back) is at most the original's plus
+/// 0.75 points, and their difference is under 2.5%. (The 46-triangle box is resolved by
+/// on-demand splits, each solve about 1% from the truth, so two triangulations differ by
+/// 1-2%: docs/mesh_quality.md.)
+fn assert_as_accurate(kind: VariantKind) {
+    use antiradiance::progress::Progress;
+    use antiradiance::reference::{solve_reference, ReferenceOptions};
+    let path = cornell_path();
+    let options = SceneOptions::default();
+    let input = load_obj(&path, &options).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("variant.obj");
+    write_variant(
+        &make_variant(&input, kind, &VariantOptions::default()).unwrap(),
+        &out,
+        &material_text(&path).unwrap(),
+        "test variant",
+    )
+    .unwrap();
+    let back = load_obj(&out, &options).unwrap();
+    let map = read_map(&map_path(&out)).unwrap();
+    let truth = solve_reference(
+        &build_patches(&input, None),
+        &ReferenceOptions {
+            spp: 512,
+            ..ReferenceOptions::default()
+        },
+        &Progress::hidden(),
+    );
+    let (original, varied) = (solve(&input), solve(&back));
+    let mapped = map_back(&map, input.len(), &varied.triangle_radiance).unwrap();
+    let areas: Vec<f64> = (0..input.len()).map(|t| input.area(t)).collect();
+    let emissive: Vec<bool> = (0..input.len()).map(|t| input.is_emitter(t)).collect();
+    let err = |x: &[[f64; 3]], y: &[[f64; 3]]| relative_error(&areas, &emissive, x, y);
+    let (e_original, e_variant) = (
+        err(&original.triangle_radiance, &truth.triangle_radiance),
+        err(&mapped, &truth.triangle_radiance),
+    );
+    let difference = err(&mapped, &original.triangle_radiance);
+    eprintln!(
+        "cornell {}: error {:.3}% (original {:.3}%), difference {:.3}%",
+        kind.name(),
+        100.0 * e_variant,
+        100.0 * e_original,
+        100.0 * difference
+    );
+    assert!(
+        e_variant <= e_original + 0.0075 && difference < 0.025,
+        "cornell {}: error {e_variant} vs original {e_original}, difference {difference}",
+        kind.name()
+    );
 }
 
 // The seed room (9,264 triangles, a few seconds per solve) when the meshes are present: its
