@@ -153,40 +153,58 @@ impl std::fmt::Display for SolveFailure {
         } else {
             format!("at sweep {}", self.sweep)
         };
+        // During the sweeps the source is what the sweeps solve for (with exact direct light,
+        // the reflected direct light); the result is checked against the emission.
+        let source = if self.in_result {
+            "largest emission"
+        } else {
+            "largest source radiance"
+        };
+        let (ratio, bound) = (number(self.largest_b_over_bound), number(self.bound));
         match self.kind {
             FailureKind::NonFinite => write!(f, "a NaN or infinite value appeared {at}")?,
             FailureKind::Growing => write!(
                 f,
-                "diverged {at}: the change per sweep grew {} sweeps in a row, to {:.3e} times its minimum",
-                self.growing_sweeps, self.change_over_min
+                "diverged {at}: the change per sweep grew {} sweeps in a row, to {} times its minimum",
+                self.growing_sweeps,
+                number(self.change_over_min)
             )?,
             FailureKind::OverBound => write!(
                 f,
-                "diverged {at}: the largest radiance is {:.3e} times the bound E_max/(1 - rho_max) = {:.6e} (allowed {})",
-                self.largest_b_over_bound,
-                self.bound,
+                "diverged {at}: the largest radiance is {ratio} times its bound ({source})/(1 - largest albedo) = {bound}, more than the {} allowed{}",
                 if self.in_result {
-                    format!("{}", 1.0 + BOUND_SLACK)
+                    1.0 + BOUND_SLACK
                 } else {
-                    format!("{DIVERGED_BOUND_FACTOR} during the sweeps")
-                }
+                    DIVERGED_BOUND_FACTOR
+                },
+                if self.in_result { "" } else { " during the sweeps" }
             )?,
             FailureKind::NegativeMass => write!(
                 f,
-                "negative radiance is {:.1}% of the positive mass {at} (at most {}% allowed)",
+                "negative radiance is {:.1}% of the positive mass {at}, more than the {}% allowed",
                 100.0 * self.negative_fraction,
                 100.0 * NEGATIVE_LIMIT
             )?,
         }
-        write!(f, " (residual {:.3e}", self.residual)?;
+        write!(f, " (residual {}", number(self.residual))?;
         if self.kind != FailureKind::OverBound && self.bound > 0.0 {
             write!(
                 f,
-                ", largest radiance {:.3e} times the bound {:.6e}",
-                self.largest_b_over_bound, self.bound
+                ", largest radiance {ratio} times its bound ({source})/(1 - largest albedo) = {bound}"
             )?;
         }
-        write!(f, ", max form-factor row sum {:.4})", self.max_row_sum)
+        write!(f, ", max form-factor row sum {})", number(self.max_row_sum))
+    }
+}
+
+/// A figure for a message: 4 decimals (trailing zeros dropped) within 1e-3..1e5, else 4
+/// significant digits in exponent form.
+fn number(x: f64) -> String {
+    if x == 0.0 || (1e-3..1e5).contains(&x.abs()) {
+        let text = format!("{x:.4}");
+        text.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        format!("{x:.3e}")
     }
 }
 
@@ -448,6 +466,7 @@ mod tests {
         assert!(!text.contains('\n'));
         assert!(text.contains("sweep 47"), "{text}");
         assert!(text.contains("8.28"), "{text}");
-        assert!(text.contains("2.200e36"), "{text}");
+        assert!(text.contains("2.200e36") && text.contains("= 4,"), "{text}");
+        assert!(text.contains("residual NaN"), "{text}");
     }
 }

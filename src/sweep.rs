@@ -767,6 +767,8 @@ fn table(solver: SolverKind, results: &[RunResult]) -> String {
                 .unwrap_or_else(|| "n/a".into()),
             if r.converged {
                 r.iterations.to_string()
+            } else if r.failed {
+                format!("{}x", r.iterations)
             } else {
                 format!("{}!", r.iterations)
             },
@@ -779,7 +781,8 @@ fn table(solver: SolverKind, results: &[RunResult]) -> String {
         );
     }
     out += "* = on the Pareto front (no other run is both faster and more accurate on the chosen \
-            time axis); ! = stopped at the iteration cap\n";
+            time axis); ! = stopped at the iteration cap; x = failed (diverged: its error \
+            measures no solution)\n";
     out
 }
 
