@@ -9,10 +9,14 @@
 use rayon::prelude::*;
 
 use crate::bins::Bins;
+use crate::health::{self, Guard};
 use crate::mesh::Patches;
+use crate::model;
 use crate::progress::Progress;
 use crate::solution::{Solution, SolveStats};
-use crate::solve::{finish, relative_change, Convergence, SolverOptions};
+use crate::solve::{
+    change_ratio, change_sums, finish, source_and_albedo_max, Convergence, SolverOptions,
+};
 use crate::transport::{couple, gather_entries, is_near, Coupling, Entry, PatchGeom, Receiver};
 
 /// A receiver's cached near pairs: (sender, coupling).
@@ -22,7 +26,11 @@ type NearList = Vec<(u32, Coupling)>;
 ///
 /// Jacobi iteration: each sweep computes every receiver's B and antiradiance bins from the
 /// previous sweep's values, until the estimated remaining error is under `options.tol` or the
-/// iteration cap is reached (then `stats.converged` is false).
+/// iteration cap is reached (then `stats.converged` is false). Every sweep is checked by a
+/// [`Guard`] (NaN or infinity, growth, radiance beyond the bound) and the result by
+/// [`finish`]; a solve that fails stops there with `stats.failure` set ([`crate::health`]). In
+/// a convex enclosure a receiver's form-factor row above 1 + [`health::ROW_SUM_TOLERANCE`] is
+/// scaled down to 1 (`stats.capped_rows`).
 pub fn solve_dense(patches: &Patches, options: &SolverOptions, progress: &Progress) -> Solution {
     let bins = Bins::new(options.bins);
     let nb = bins.len();
@@ -48,6 +56,22 @@ pub fn solve_dense(patches: &Patches, options: &SolverOptions, progress: &Progre
         ..SolveStats::default()
     };
     let mut convergence = Convergence::default();
+    // The bound on B (maximum principle; not for unoccluded radiosity) and the mass the sweeps'
+    // changes are measured against.
+    let (source_max, rho_max) = source_and_albedo_max(patches);
+    let bound = health::radiance_bound(source_max, rho_max);
+    let reference_mass: f64 = active
+        .iter()
+        .map(|&p| patches.area[p] * emission[p].iter().map(|x| x.abs()).sum::<f64>())
+        .sum::<f64>()
+        / (1.0 - rho_max.clamp(0.0, 0.9999));
+    let mut guard = Guard::new(
+        options.antiradiance.then_some(bound),
+        reference_mass,
+        patches.emission_scale,
+    );
+    // In a convex enclosure the unoccluded rows are the visible ones and may be capped at 1.
+    let convex = model::patches_convex(patches);
 
     // Near pairs: computed once, kept per receiver as (sender, entries). Each receiver's
     // quadrature is fixed by its nearest exchanging sender (one set of points per receiver).
@@ -90,7 +114,7 @@ pub fn solve_dense(patches: &Patches, options: &SolverOptions, progress: &Progre
 
     for iteration in 1..=options.max_iterations {
         // One Jacobi sweep: every receiver gathers from every active sender.
-        let row_sums: Vec<(f64, u64)> = next_radiance
+        let sweep: Vec<ReceiverSweep> = next_radiance
             .par_iter_mut()
             .zip(next_anti.par_chunks_mut(nb))
             .enumerate()
@@ -98,7 +122,11 @@ pub fn solve_dense(patches: &Patches, options: &SolverOptions, progress: &Progre
                 let Some(receiver) = &receivers[r] else {
                     *b_out = emission[r];
                     a_out.fill([0.0; 3]);
-                    return (0.0, 0);
+                    return ReceiverSweep {
+                        largest: emission[r].iter().fold(0.0, |m, x| m.max(x.abs())),
+                        finite: true,
+                        ..ReceiverSweep::default()
+                    };
                 };
                 let mut h = [0.0f64; 3];
                 let mut a_acc = vec![[0.0f64; 3]; nb];
@@ -130,8 +158,15 @@ pub fn solve_dense(patches: &Patches, options: &SolverOptions, progress: &Progre
                         gather(s, &coupling);
                     }
                 }
+                // A row above 1 in a convex enclosure is discretization error: scale it to 1.
+                let capped = convex && row > 1.0 + health::ROW_SUM_TOLERANCE;
+                let scale = if capped { 1.0 / row } else { 1.0 };
+                let mut largest = 0.0f64;
+                let mut finite = true;
                 for c in 0..3 {
-                    b_out[c] = emission[r][c] + patches.albedo[r][c] * h[c];
+                    b_out[c] = emission[r][c] + patches.albedo[r][c] * (scale * h[c]);
+                    largest = largest.max(b_out[c].abs());
+                    finite &= b_out[c].is_finite();
                 }
                 for (dst, src) in a_out.iter_mut().zip(&a_acc) {
                     *dst = if options.antiradiance {
@@ -139,26 +174,63 @@ pub fn solve_dense(patches: &Patches, options: &SolverOptions, progress: &Progre
                     } else {
                         [0.0; 3]
                     };
+                    finite &= dst.iter().all(|x| x.is_finite());
                 }
-                (row, links)
+                ReceiverSweep {
+                    row,
+                    links,
+                    capped,
+                    largest,
+                    finite,
+                }
             })
             .collect();
         if iteration == 1 {
-            stats.max_row_sum = row_sums.iter().map(|r| r.0).fold(0.0, f64::max);
-            stats.links = row_sums.iter().map(|r| r.1).sum();
+            stats.max_row_sum = sweep.iter().map(|r| r.row).fold(0.0, f64::max);
+            stats.links = sweep.iter().map(|r| r.links).sum();
+            stats.capped_rows = sweep.iter().filter(|r| r.capped).count();
         }
+        let largest = sweep.iter().map(|r| r.largest).fold(0.0, f64::max);
+        let finite = sweep.iter().all(|r| r.finite);
 
-        let change = relative_change(patches, &radiance, &next_radiance);
+        let (num, den) = change_sums(patches, &radiance, &next_radiance);
+        let change = change_ratio(num, den);
         std::mem::swap(&mut radiance, &mut next_radiance);
         std::mem::swap(&mut anti, &mut next_anti);
         stats.iterations = iteration;
         progress.inc(1);
         progress.message(format!("residual {change:.2e}"));
+        if let Some(failure) = guard.sweep(iteration, change, num, largest, finite) {
+            convergence.residual = change;
+            stats.failure = Some(failure);
+            break;
+        }
         if convergence.sweep_done(iteration, change, options.tol) {
             stats.converged = true;
             break;
         }
     }
     stats.residual = convergence.residual;
-    finish(patches, radiance, stats, options.clamp_negative)
+    finish(
+        patches,
+        radiance,
+        stats,
+        options.clamp_negative,
+        options.antiradiance,
+    )
+}
+
+/// What one receiver's gather in a dense sweep reports (`Default` is for fields left unset).
+#[derive(Clone, Copy, Debug, Default)]
+struct ReceiverSweep {
+    /// Its form-factor row sum (before capping).
+    row: f64,
+    /// Senders it exchanged with.
+    links: u64,
+    /// True when its row was scaled down to 1.
+    capped: bool,
+    /// Its largest |B| over the channels.
+    largest: f64,
+    /// True when every value it wrote is finite.
+    finite: bool,
 }

@@ -48,7 +48,7 @@ use crate::mesh::Patches;
 use crate::progress::Progress;
 use crate::raytrace::RayScene;
 use crate::sampling::{point_on_triangle, Rng};
-use crate::solution::Solution;
+use crate::solution::{Solution, SolveStats};
 use crate::solve::{finish, SolverOptions};
 use crate::transport::{separation, PatchGeom, FAR_RATIO};
 
@@ -1033,7 +1033,13 @@ pub fn solve_hierarchical_direct(
     let (reflected, state) = prepared.solve_with_source(patches, &source, None, progress);
     // `reflected` is R clamped and scaled; B is formed from the unclamped element values.
     let radiance = add_emission(patches, &receivers, state.radiance());
-    finish(patches, radiance, reflected.stats, options.clamp_negative)
+    finish(
+        patches,
+        radiance,
+        sweep_checks_only(reflected.stats),
+        options.clamp_negative,
+        options.antiradiance,
+    )
 }
 
 /// Solves the scene with the dense solver and exact direct light (the reflected direct light is
@@ -1069,7 +1075,23 @@ pub fn solve_dense_direct(
         .map(|r| reflected.patch_radiance[r.patch as usize].map(|x| x * inv_scale))
         .collect();
     let radiance = add_emission(patches, &receivers, &patch_reflected);
-    finish(patches, radiance, reflected.stats, options.clamp_negative)
+    finish(
+        patches,
+        radiance,
+        sweep_checks_only(reflected.stats),
+        options.clamp_negative,
+        options.antiradiance,
+    )
+}
+
+/// The statistics of the indirect solve without the checks of its result (bound, negative
+/// mass): those are made again on `B = E + R`, which is what the solve returns. A failure found
+/// during the sweeps stays.
+fn sweep_checks_only(mut stats: SolveStats) -> SolveStats {
+    if stats.failure.as_ref().is_some_and(|f| f.in_result) {
+        stats.failure = None;
+    }
+    stats
 }
 
 #[cfg(test)]

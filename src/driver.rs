@@ -586,8 +586,10 @@ pub fn run_solver(
     solution
 }
 
-/// The warnings of one antiradiance solve: iteration cap ([`cap_warning`]) and skipped direct
-/// light ([`direct_light_warning`]).
+/// The warnings of one antiradiance solve: iteration cap ([`cap_warning`]), skipped direct
+/// light ([`direct_light_warning`]), capped form-factor rows ([`capped_rows_warning`]) and
+/// much negative radiance ([`negative_warning`]). A failed solve is not warned about here: it
+/// is an error ([`SolveStats::check`]).
 pub fn solve_warnings(
     kind: SolverKind,
     stats: &SolveStats,
@@ -597,7 +599,44 @@ pub fn solve_warnings(
     cap_warning(kind.name(), stats, options, patches)
         .into_iter()
         .chain(direct_light_warning(stats, options))
+        .chain(capped_rows_warning(kind.name(), stats))
+        .chain(negative_warning(kind.name(), stats, options))
         .collect()
+}
+
+/// The warning for a solve that scaled form-factor rows down to 1 (a convex enclosure whose
+/// rows summed above 1 + [`crate::health::ROW_SUM_TOLERANCE`]; `None` when none was).
+pub fn capped_rows_warning(solver: &str, stats: &SolveStats) -> Option<String> {
+    (stats.capped_rows > 0).then(|| {
+        format!(
+            "the {solver} solver scaled {} down to 1: in this convex enclosure their form factors summed to up to {:.6} (more than 1 + {:.0e}, discretization error that 1/(1 - rho) would amplify)",
+            plural(stats.capped_rows, "form-factor row", "form-factor rows"),
+            stats.max_row_sum,
+            crate::health::ROW_SUM_TOLERANCE
+        )
+    })
+}
+
+/// The warning for a solve whose negative radiance mass is above
+/// [`crate::health::NEGATIVE_WARNING`] of the positive (but not above
+/// [`crate::health::NEGATIVE_LIMIT`], which fails the solve); `None` otherwise.
+pub fn negative_warning(
+    solver: &str,
+    stats: &SolveStats,
+    options: &SolverOptions,
+) -> Option<String> {
+    (stats.failure.is_none() && stats.negative_fraction > crate::health::NEGATIVE_WARNING).then(|| {
+        format!(
+            "the {solver} solver's negative radiance is {:.1}% of the positive mass (more than {:.0}%): antiradiance cancelled more light than it should{}; more --bins usually lowers it",
+            100.0 * stats.negative_fraction,
+            100.0 * crate::health::NEGATIVE_WARNING,
+            if options.two_sided {
+                ", which two-sided antiradiance does where surfaces are doubled back to back"
+            } else {
+                ""
+            }
+        )
+    })
 }
 
 /// The warning for a solve that was asked for exact direct light but skipped it because the
@@ -623,7 +662,7 @@ pub fn cap_warning(
     options: &SolverOptions,
     patches: &Patches,
 ) -> Option<String> {
-    if stats.converged {
+    if stats.converged || stats.failure.is_some() {
         return None;
     }
     let rho = (0..patches.len())
@@ -774,13 +813,24 @@ impl Report {
     }
 }
 
-/// Solver statistics as they appear in reports (non-finite numbers become 0 rather than null).
+/// Solver statistics as they appear in reports. Non-finite numbers become 0 rather than null,
+/// except the residual of a failed solve (null when it was NaN or infinite: that is what
+/// failed); `failure` is null for a healthy solve, else the failure's figures with its one-line
+/// `message`.
 pub fn stats_json(stats: &SolveStats) -> Value {
     let mut s = stats.clone();
-    s.residual = solution::sanitize(s.residual);
+    if s.failure.is_none() {
+        s.residual = solution::sanitize(s.residual);
+    }
     s.negative_fraction = solution::sanitize(s.negative_fraction);
     s.max_row_sum = solution::sanitize(s.max_row_sum);
-    serde_json::to_value(s).unwrap_or(Value::Null)
+    s.largest_b_over_bound = solution::sanitize(s.largest_b_over_bound);
+    s.radiance_bound = solution::sanitize(s.radiance_bound);
+    let mut value = serde_json::to_value(s).unwrap_or(Value::Null);
+    if let (Some(f), Some(Value::Object(failure))) = (&stats.failure, value.get_mut("failure")) {
+        failure.insert("message".into(), Value::String(f.to_string()));
+    }
+    value
 }
 
 /// The design-note error of `estimate` against `truth`, per input triangle of `scene`.
@@ -814,9 +864,13 @@ pub fn solve(args: &SolveArgs) -> Result<()> {
     for w in &cap {
         eprintln!("warning: {w}");
     }
-    timed(&mut timings.output, || {
-        write_outputs(&args.output, &loaded, &solution)
-    })?;
+    // A failed solve writes no result (picture, PLY, CSV); its report says why.
+    let failed = solution.stats.check(args.solver.name());
+    if failed.is_ok() {
+        timed(&mut timings.output, || {
+            write_outputs(&args.output, &loaded, &solution)
+        })?;
+    }
     timings.total = start.elapsed().as_secs_f64();
     let peak = memory::peak_rss_bytes();
 
@@ -837,6 +891,7 @@ pub fn solve(args: &SolveArgs) -> Result<()> {
             .finish(&timings, peak);
         report.write(path)?;
     }
+    failed?;
     if !args.quiet {
         eprintln!(
             "{}",
@@ -969,6 +1024,8 @@ pub fn compare(args: &CompareArgs) -> Result<()> {
             eprintln!("warning: {w}");
             cap_warnings.push(w);
         }
+        // A failed solve makes the comparison meaningless: no table, no report.
+        solution.stats.check(kind.name())?;
         runs.push((kind, solution, seconds, delta));
     }
     let reference_options = args.reference_spp.map(|spp| ReferenceOptions {

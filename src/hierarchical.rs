@@ -17,13 +17,14 @@ use rayon::prelude::*;
 
 use crate::accelerate::Anderson;
 use crate::bins::Bins;
+use crate::health::{self, Guard};
 use crate::hierarchy::{ClusterTree, NONE};
 use crate::links::{self, ClusterLink, LinkParams, Links};
 use crate::mesh::Patches;
 use crate::model::{self, ModelStats};
 use crate::progress::Progress;
 use crate::solution::{Solution, SolveStats};
-use crate::solve::{finish, Convergence, SolverOptions};
+use crate::solve::{change_ratio, finish, Convergence, SolverOptions};
 use crate::transport::gather_entries;
 
 /// Time spent in each stage of a hierarchical solve, seconds.
@@ -378,6 +379,29 @@ impl Prepared {
             ..SolveStats::default()
         };
         let mut convergence = Convergence::default();
+        // The bound on B (maximum principle; not for unoccluded radiosity) and the mass the
+        // sweeps' changes are measured against.
+        let rho_max = albedo
+            .iter()
+            .flat_map(|a| a.iter().copied())
+            .fold(0.0f64, f64::max);
+        let source_max = emission
+            .iter()
+            .flat_map(|s| s.iter().map(|x| x.abs()))
+            .fold(0.0f64, f64::max);
+        let reference_mass: f64 = emission
+            .iter()
+            .zip(&self.elem_area)
+            .map(|(s, &a)| a * s.iter().map(|x| x.abs()).sum::<f64>())
+            .sum::<f64>()
+            / (1.0 - rho_max.clamp(0.0, 0.9999));
+        let mut guard = Guard::new(
+            options
+                .antiradiance
+                .then(|| health::radiance_bound(source_max, rho_max)),
+            reference_mass,
+            patches.emission_scale,
+        );
         // Anderson acceleration when its history fits its budget; its residuals shrink faster
         // than the plain sweep's contraction, so the remaining error is estimated with the
         // largest albedo as the contraction bound instead.
@@ -398,11 +422,7 @@ impl Prepared {
                 Anderson::new(depth, weight)
             });
         if anderson.is_some() {
-            let rho = albedo
-                .iter()
-                .flat_map(|a| a.iter().copied())
-                .fold(0.0f64, f64::max);
-            convergence.contraction_bound = Some(rho);
+            convergence.contraction_bound = Some(rho_max);
             stats.extrapolations = 0;
         }
         let (mut x_flat, mut g_flat) = (Vec::new(), Vec::new());
@@ -442,7 +462,7 @@ impl Prepared {
             //    antiradiance goes to the link's bin, the one its sender reads when it passes it on).
             //    Only the element's stored bins are kept.
             let anti_out = split_by_start(&mut next_anti, &live.start);
-            let change_parts: Vec<(f64, f64, f64)> = next_radiance
+            let change_parts: Vec<SweepSums> = next_radiance
                 .par_iter_mut()
                 .zip(anti_out.into_par_iter())
                 .enumerate()
@@ -498,40 +518,50 @@ impl Prepared {
                             }
                             None => ctx.for_each_pair(e, links, |i, l, k| add(l, &intensity[i], k)),
                         }
+                        let mut largest = 0.0f64;
+                        let mut finite = true;
                         for c in 0..C {
                             b_out[c] = emission[e][c] + albedo[e][c] * h[c];
+                            largest = largest.max(b_out[c].abs());
+                            finite &= b_out[c].is_finite();
                         }
                         for (dst, bin) in a_out.iter_mut().zip(live.bins_of(e)) {
                             *dst = a_acc[bin].map(|x| x as f32);
+                            finite &= dst.iter().all(|x| x.is_finite());
                         }
                         let a = elem_area[e];
                         let num: f64 = (0..C).map(|c| a * (b_out[c] - radiance[e][c]).abs()).sum();
                         let den: f64 = (0..C).map(|c| a * b_out[c].abs()).sum();
-                        (num, den, row)
+                        SweepSums {
+                            num,
+                            den,
+                            max_row: row,
+                            largest,
+                            finite,
+                        }
                     },
                 )
                 .collect();
 
-            let sums = change_parts.iter().fold(SweepSums::default(), |acc, p| {
-                acc.add(SweepSums {
-                    num: p.0,
-                    den: p.1,
-                    max_row: p.2,
-                })
-            });
+            let sums = change_parts
+                .iter()
+                .fold(SweepSums::default(), |acc, p| acc.add(*p));
             if iteration == 1 {
                 stats.max_row_sum = sums.max_row;
             }
-            let change = if sums.den > 0.0 {
-                sums.num / sums.den
-            } else {
-                0.0
-            };
+            let change = change_ratio(sums.num, sums.den);
             std::mem::swap(&mut radiance, &mut next_radiance);
             std::mem::swap(&mut anti, &mut next_anti);
             stats.iterations = iteration;
             progress.inc(1);
             progress.message(format!("residual {change:.2e}"));
+            if let Some(failure) =
+                guard.sweep(iteration, change, sums.num, sums.largest, sums.finite)
+            {
+                convergence.residual = change;
+                stats.failure = Some(failure);
+                break;
+            }
             if convergence.sweep_done(iteration, change, options.tol) {
                 stats.converged = true;
                 break;
@@ -584,7 +614,13 @@ impl Prepared {
             exact_links: self.links.exact_sender.len() as u64,
             refinement: self.links.stats.clone(),
         });
-        let solution = finish(patches, patch_radiance, stats, options.clamp_negative);
+        let solution = finish(
+            patches,
+            patch_radiance,
+            stats,
+            options.clamp_negative,
+            options.antiradiance,
+        );
         let state = ElementState {
             radiance: radiance_rgb,
             anti: anti.iter().flatten().copied().collect(),
@@ -887,12 +923,27 @@ impl SenderGroups {
     }
 }
 
-/// Sums over a sweep's elements: relative change numerator and denominator, largest row sum.
-#[derive(Clone, Copy, Debug, Default)]
+/// Sums over a sweep's elements: relative change numerator and denominator, largest row sum
+/// (exact links), largest |B|, and whether every value written was finite.
+#[derive(Clone, Copy, Debug)]
 struct SweepSums {
     num: f64,
     den: f64,
     max_row: f64,
+    largest: f64,
+    finite: bool,
+}
+
+impl Default for SweepSums {
+    fn default() -> Self {
+        SweepSums {
+            num: 0.0,
+            den: 0.0,
+            max_row: 0.0,
+            largest: 0.0,
+            finite: true,
+        }
+    }
 }
 
 impl SweepSums {
@@ -901,6 +952,8 @@ impl SweepSums {
             num: self.num + o.num,
             den: self.den + o.den,
             max_row: self.max_row.max(o.max_row),
+            largest: self.largest.max(o.largest),
+            finite: self.finite && o.finite,
         }
     }
 }

@@ -15,6 +15,7 @@ pub mod direct;
 pub mod driver;
 pub mod error;
 pub mod geometry;
+pub mod health;
 pub mod hierarchical;
 pub mod hierarchy;
 pub mod interiors;

@@ -155,6 +155,39 @@ pub fn is_convex_enclosure(tree: &ClusterTree) -> bool {
     planes.par_iter().all(|&(n, d)| all_in_front(tree, n, d))
 }
 
+/// [`is_convex_enclosure`] over patches rather than a tree (the dense solver's test): true when
+/// every active patch lies on or in front of the plane of every other (within
+/// [`CONVEX_TOLERANCE`]). Each distinct plane is tested against every corner, so a convex scene
+/// costs (distinct planes) x (patches) and a non-convex one usually stops at its first plane.
+pub fn patches_convex(patches: &crate::mesh::Patches) -> bool {
+    let active: Vec<usize> = (0..patches.len()).filter(|&p| patches.active[p]).collect();
+    if active.is_empty() {
+        return false;
+    }
+    let mut planes: Vec<(DVec3, f64)> = Vec::new();
+    let mut seen = std::collections::HashSet::new();
+    for &p in &active {
+        let n = patches.normal[p];
+        let d = n.dot(patches.corners[p][0]);
+        let key = (
+            (n.x * 1e9).round() as i64,
+            (n.y * 1e9).round() as i64,
+            (n.z * 1e9).round() as i64,
+            (d * 1e9).round() as i64,
+        );
+        if seen.insert(key) {
+            planes.push((n, d));
+        }
+    }
+    planes.par_iter().all(|&(n, d)| {
+        active.iter().all(|&p| {
+            patches.corners[p]
+                .iter()
+                .all(|c| n.dot(*c) - d >= -CONVEX_TOLERANCE)
+        })
+    })
+}
+
 /// True when every element corner below the root lies at signed distance >= -tolerance from the
 /// plane `n . x = d`.
 fn all_in_front(tree: &ClusterTree, n: DVec3, d: f64) -> bool {

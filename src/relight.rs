@@ -322,7 +322,11 @@ impl Relighter {
     }
 
     /// Solves for the current emission, warm-started from the previous solve when there is one.
-    /// Never fails: the emission was checked when it was set; no NaN reaches the solution.
+    /// Returns a solution in every case (the emission was checked when it was set; no NaN
+    /// reaches the solution), but one whose solve failed its health checks carries
+    /// `solution.stats.failure` with `converged == false` ([`crate::health`]; check it with
+    /// [`crate::solution::SolveStats::check`]): its radiance is not a solution, and the next
+    /// solve starts cold rather than from it.
     pub fn solve(&mut self, progress: &Progress) -> Relit {
         let start = Instant::now();
         let brightest = self.brightest();
@@ -347,7 +351,8 @@ impl Relighter {
             warm.as_ref(),
             progress,
         );
-        self.warm = Some(state);
+        // A failed solve's state is not worth starting from.
+        self.warm = solution.stats.failure.is_none().then_some(state);
         Relit {
             solution,
             warm_started,
@@ -362,7 +367,8 @@ impl Relighter {
     /// tolerance each light was solved to). One from-scratch solve per light; returns the
     /// light's index. The relighter's current emission and warm state are left unchanged.
     ///
-    /// Errors: as [`Relighter::set_emission`] (nothing is added).
+    /// Errors: as [`Relighter::set_emission`], and [`Error::Solve`] when the light's solve
+    /// failed its health checks ([`crate::health`]); nothing is added either way.
     pub fn add_light(&mut self, name: &str, per_triangle: &[[f64; 3]]) -> Result<usize> {
         let current = self.emission.clone();
         let warm = self.warm.take();
@@ -375,6 +381,11 @@ impl Relighter {
         self.emission = current;
         self.warm = warm;
         self.patches.emission_scale = scale;
+        relit
+            .solution
+            .stats
+            .check("hierarchical")
+            .map_err(|e| Error::Solve(format!("light '{name}': {e}")))?;
         self.lights.push(Light {
             name: name.to_string(),
             emission: per_triangle.to_vec(),
@@ -386,7 +397,10 @@ impl Relighter {
     /// Adds one light ([`Relighter::add_light`]) per material that emits in the current
     /// emission, named after the material, with that material's triangles at their current
     /// emission; returns their indices.
-    pub fn add_material_lights(&mut self) -> Vec<usize> {
+    ///
+    /// Errors: [`Error::Solve`] when a light's solve failed its health checks (the lights
+    /// added before it stay).
+    pub fn add_material_lights(&mut self) -> Result<Vec<usize>> {
         let mut added = Vec::new();
         for m in 0..self.material_names.len() as u32 {
             let emission: Vec<[f64; 3]> = (0..self.emission.len())
@@ -400,10 +414,10 @@ impl Relighter {
                 .collect();
             if emission.iter().any(|e| e.iter().any(|&x| x > 0.0)) {
                 let name = self.material_names[m as usize].clone();
-                added.push(self.add_light(&name, &emission).expect("checked emission"));
+                added.push(self.add_light(&name, &emission)?);
             }
         }
-        added
+        Ok(added)
     }
 
     /// Adds one light ([`Relighter::add_light`]) per band of `emitters` (input triangles, with
@@ -501,6 +515,7 @@ impl Relighter {
             normalized,
             stats,
             self.prepared.options.clamp_negative,
+            self.prepared.options.antiradiance,
         );
         Ok(Relit {
             solution,
@@ -965,6 +980,12 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
             }
         };
         timings.solve += relit.seconds;
+        // A failed relight is an error: its frame and the later ones are not written.
+        relit
+            .solution
+            .stats
+            .check("hierarchical")
+            .map_err(|e| Error::Solve(format!("frame {frame}: {e}")))?;
         if camera.exposure.is_none() {
             camera.exposure = Some(render::auto_exposure(relighter.patches(), &relit.solution));
         }

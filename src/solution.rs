@@ -21,8 +21,29 @@ pub struct SolveStats {
     /// `--max-edge` splitting, the number of negative rows of the per-triangle CSV under
     /// `--keep-negative` (tested in tests/stability.rs).
     pub negative_patches: usize,
-    /// Largest receiver form-factor row sum (<= 1 up to discretization; 1 in a closed enclosure).
+    /// Largest receiver form-factor row sum, before any capping: the unoccluded form factors of
+    /// every sender a receiver reads (through the sender's front, and through its back where
+    /// antiradiance can leave it). 1 in a closed convex enclosure; above 1 wherever surfaces
+    /// stand behind one another, which is not an error (see [`crate::health`]). The dense
+    /// solver counts every pair; the hierarchical one its exact links only, and its cluster
+    /// links too in a convex enclosure (where rows are capped).
     pub max_row_sum: f64,
+    /// Receivers whose form-factor row summed above 1 + [`crate::health::ROW_SUM_TOLERANCE`] in
+    /// a convex enclosure and was scaled down to 1 (0 elsewhere: see [`crate::health`]).
+    pub capped_rows: usize,
+    /// The bound on every B the emission and albedos allow, `E_max / (1 - rho_max)`, in the
+    /// scene's radiance units (E_max the largest source radiance of the solve); 0 when none is
+    /// checked (unoccluded radiosity, or no light).
+    pub radiance_bound: f64,
+    /// Largest |B| of the result (before clamping) over [`SolveStats::radiance_bound`]; at most
+    /// 1 for the exact model, checked against 1 + [`crate::health::BOUND_SLACK`].
+    pub largest_b_over_bound: f64,
+    /// Why the solve failed, when it did (diverged, non-finite values, radiance beyond the
+    /// bound, negative mass comparable to the positive; see [`crate::health`]). A failed solve
+    /// has `converged == false` and its radiance is not a solution of the scene:
+    /// [`SolveStats::check`] turns it into an error. Left out of the JSON when `None`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub failure: Option<crate::health::SolveFailure>,
     /// Transport links (dense: ordered patch pairs that exchange anything).
     pub links: u64,
     /// Bytes held by the solver's main arrays at their peak.
@@ -65,6 +86,19 @@ pub struct Solution {
     pub triangle_radiance: Vec<[f64; 3]>,
     /// How the solve went.
     pub stats: SolveStats,
+}
+
+impl SolveStats {
+    /// `Ok` unless the solve failed its health checks ([`SolveStats::failure`]); then an
+    /// [`crate::Error::Solve`] naming `solver` and what failed, where and by how much.
+    pub fn check(&self, solver: &str) -> crate::Result<()> {
+        match &self.failure {
+            None => Ok(()),
+            Some(f) => Err(crate::Error::Solve(format!(
+                "the {solver} solver failed: {f}"
+            ))),
+        }
+    }
 }
 
 impl Solution {

@@ -4,6 +4,7 @@
 use serde::Serialize;
 
 use crate::error::{Error, Result};
+use crate::health::{self, FailureKind, SolveFailure};
 use crate::mesh::Patches;
 use crate::solution::{sanitize, Solution, SolveStats};
 use crate::transport::CouplingParams;
@@ -258,8 +259,15 @@ impl Convergence {
 /// Fewest sweeps before convergence may be declared.
 pub const MIN_SWEEPS: usize = 3;
 
-/// Area-weighted relative L1 change between two radiance vectors.
+/// Area-weighted relative L1 change between two radiance vectors (NaN when the new vector is
+/// not finite, never 0 for a change that overflowed).
 pub fn relative_change(patches: &Patches, old: &[[f64; 3]], new: &[[f64; 3]]) -> f64 {
+    let (num, den) = change_sums(patches, old, new);
+    change_ratio(num, den)
+}
+
+/// The area-weighted L1 norms `(sum a |new - old|, sum a |new|)` over patches and RGB channels.
+pub fn change_sums(patches: &Patches, old: &[[f64; 3]], new: &[[f64; 3]]) -> (f64, f64) {
     let mut num = 0.0;
     let mut den = 0.0;
     for p in 0..patches.len() {
@@ -269,21 +277,66 @@ pub fn relative_change(patches: &Patches, old: &[[f64; 3]], new: &[[f64; 3]]) ->
             den += a * new[p][c].abs();
         }
     }
-    if den > 0.0 {
+    (num, den)
+}
+
+/// The relative change `num / den`: 0 when nothing is lit (`den == 0`), NaN when either sum is
+/// not finite (an overflowed sweep must not read as "no change").
+pub fn change_ratio(num: f64, den: f64) -> f64 {
+    if !(num.is_finite() && den.is_finite()) {
+        f64::NAN
+    } else if den > 0.0 {
         num / den
     } else {
         0.0
     }
 }
 
+/// The largest source radiance (any channel, absolute) and the largest albedo over the active
+/// patches, the two figures of the bound [`health::radiance_bound`].
+pub fn source_and_albedo_max(patches: &Patches) -> (f64, f64) {
+    let mut e_max = 0.0f64;
+    let mut rho_max = 0.0f64;
+    for p in (0..patches.len()).filter(|&p| patches.active[p]) {
+        for c in 0..3 {
+            e_max = e_max.max(patches.emission[p][c].abs());
+            rho_max = rho_max.max(patches.albedo[p][c]);
+        }
+    }
+    (e_max, rho_max)
+}
+
 /// Turns normalized per-patch radiance into a [`Solution`]: measures and optionally clamps
-/// negative radiance, removes non-finite values, scales back to the scene's units.
+/// negative radiance, checks the result's health, removes non-finite values, scales back to the
+/// scene's units.
+///
+/// The checks ([`crate::health`]): a NaN or infinity among the active patches, a largest |B|
+/// above 1 + [`health::BOUND_SLACK`] times `E_max / (1 - rho_max)` (the patches' own emission
+/// and albedos; only when `check_bound`: the bound does not hold for unoccluded radiosity) and
+/// negative mass above [`health::NEGATIVE_LIMIT`] of the positive each set
+/// `stats.failure` (unless a failure is already there) and so `converged = false`. The
+/// figures (`largest_b_over_bound`, `radiance_bound`, `negative_fraction`) are set either way.
 pub fn finish(
     patches: &Patches,
     mut radiance: Vec<[f64; 3]>,
     mut stats: SolveStats,
     clamp_negative: bool,
+    check_bound: bool,
 ) -> Solution {
+    let (e_max, rho_max) = source_and_albedo_max(patches);
+    let bound = health::radiance_bound(e_max, rho_max);
+    let mut largest = 0.0f64;
+    let mut finite = true;
+    for (p, b) in radiance.iter().enumerate() {
+        if patches.active[p] {
+            for &x in b {
+                finite &= x.is_finite();
+                if x.is_finite() {
+                    largest = largest.max(x.abs());
+                }
+            }
+        }
+    }
     let mut negative = 0.0;
     let mut positive = 0.0;
     let mut negative_patches = 0;
@@ -310,5 +363,44 @@ pub fn finish(
         0.0
     };
     stats.negative_patches = negative_patches;
+    let checked = check_bound && bound > 0.0 && bound.is_finite();
+    let ratio = if checked { largest / bound } else { 0.0 };
+    stats.largest_b_over_bound = ratio;
+    stats.radiance_bound = if checked {
+        sanitize(bound * patches.emission_scale)
+    } else {
+        0.0
+    };
+    if stats.failure.is_none() {
+        let kind = if !finite {
+            Some(FailureKind::NonFinite)
+        } else if ratio > 1.0 + health::BOUND_SLACK {
+            Some(FailureKind::OverBound)
+        } else if stats.negative_fraction > health::NEGATIVE_LIMIT {
+            Some(FailureKind::NegativeMass)
+        } else {
+            None
+        };
+        stats.failure = kind.map(|kind| SolveFailure {
+            kind,
+            sweep: stats.iterations,
+            in_result: true,
+            residual: stats.residual,
+            change_over_min: 0.0,
+            growing_sweeps: 0,
+            largest_b_over_bound: ratio,
+            bound: 0.0,
+            negative_fraction: 0.0,
+            max_row_sum: 0.0,
+        });
+    }
+    if let Some(f) = stats.failure.as_mut() {
+        if f.in_result {
+            f.bound = stats.radiance_bound;
+        }
+        f.max_row_sum = stats.max_row_sum;
+        f.negative_fraction = stats.negative_fraction;
+        stats.converged = false;
+    }
     Solution::from_normalized(patches, &radiance, stats)
 }

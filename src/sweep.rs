@@ -422,6 +422,9 @@ pub struct RunResult {
     pub error: f64,
     /// True when no other run is at least as fast and as accurate and better in one of them.
     pub pareto: bool,
+    /// True when the solve failed its health checks ([`crate::health`]): `converged` is false,
+    /// `error` measures a result that is not a solution, and the run is never on the front.
+    pub failed: bool,
 }
 
 impl RunResult {
@@ -552,6 +555,10 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
             }
             let error = relative_error(&areas, &emissive, &solution.triangle_radiance, &truth);
             let s = &solution.stats;
+            // A failed run stays in the table (converged 0) and off the Pareto front.
+            if let Err(e) = s.check(args.solver.name()) {
+                eprintln!("warning: run {}/{}: {e}", i + 1, total);
+            }
             let result = RunResult {
                 spec: spec.clone(),
                 seconds,
@@ -564,6 +571,7 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
                 negative_fraction: s.negative_fraction,
                 error,
                 pareto: false,
+                failed: s.failure.is_some(),
             };
             if !args.quiet {
                 eprintln!(
@@ -585,11 +593,14 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
     let front = pareto_front(
         &results
             .iter()
-            .map(|r| (r.time(args.time_axis), r.error))
+            .map(|r| {
+                let error = if r.failed { f64::INFINITY } else { r.error };
+                (r.time(args.time_axis), error)
+            })
             .collect::<Vec<_>>(),
     );
     for (r, on_front) in results.iter_mut().zip(front) {
-        r.pareto = on_front;
+        r.pareto = on_front && !r.failed;
     }
 
     // 4. Outputs: CSV, plot, table.
@@ -756,6 +767,8 @@ fn table(solver: SolverKind, results: &[RunResult]) -> String {
                 .unwrap_or_else(|| "n/a".into()),
             if r.converged {
                 r.iterations.to_string()
+            } else if r.failed {
+                format!("{}x", r.iterations)
             } else {
                 format!("{}!", r.iterations)
             },
@@ -768,7 +781,8 @@ fn table(solver: SolverKind, results: &[RunResult]) -> String {
         );
     }
     out += "* = on the Pareto front (no other run is both faster and more accurate on the chosen \
-            time axis); ! = stopped at the iteration cap\n";
+            time axis); ! = stopped at the iteration cap; x = failed (diverged: its error \
+            measures no solution)\n";
     out
 }
 
