@@ -37,6 +37,10 @@ pub enum Error {
     /// A command-line or library parameter is out of its valid range.
     #[error("invalid parameter: {0}")]
     Parameter(String),
+    /// A solve does not fit its memory limit, even coarsened (see [`crate::budget`]); raised
+    /// before the large arrays are allocated.
+    #[error("{0}")]
+    Memory(String),
 }
 
 impl Error {
