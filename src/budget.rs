@@ -492,6 +492,9 @@ pub struct MemoryStats {
     pub bins: usize,
     /// Split depth of the model solved (0 for the dense solver).
     pub split_depth: u8,
+    /// Seconds spent on the refinements that did not fit (the solve's `stage_seconds` are
+    /// those of the model solved).
+    pub discarded_seconds: f64,
 }
 
 /// Estimated bytes of the exact direct light for `patches` patches, `emitters` emitting patches

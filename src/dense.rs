@@ -213,6 +213,7 @@ pub fn solve_dense(
         epsilon: 0.0,
         bins: options.bins,
         split_depth: 0,
+        discarded_seconds: 0.0,
     });
     Ok(finish(patches, radiance, stats, options.clamp_negative))
 }

@@ -187,6 +187,7 @@ impl Prepared {
         let mut model = options.clone();
         let mut coarsened = Vec::new();
         let mut attempts = 0;
+        let mut discarded_seconds = 0.0;
         loop {
             let link_budget = LinkBudget {
                 costs: HierarchicalCosts::new(model.bins, channels),
@@ -194,6 +195,7 @@ impl Prepared {
                 patches: patches.len() as u64,
             };
             attempts += 1;
+            let t_attempt = Instant::now();
             let over = match Prepared::build(patches, &model, record_culled, &link_budget) {
                 Ok(mut prepared) => {
                     coarsened.append(&mut prepared.memory.coarsened);
@@ -205,12 +207,14 @@ impl Prepared {
                         epsilon: model.epsilon,
                         bins: model.bins,
                         split_depth: model.split_depth,
+                        discarded_seconds,
                         ..prepared.memory
                     };
                     return Ok(prepared);
                 }
                 Err(over) => over,
             };
+            discarded_seconds += t_attempt.elapsed().as_secs_f64();
             match budget::coarser(&model) {
                 Some((next, step)) => {
                     coarsened.push(step);
