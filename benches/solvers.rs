@@ -10,6 +10,7 @@ use std::path::Path;
 use std::time::Duration;
 
 use antiradiance::bins::Bins;
+use antiradiance::budget::LinkBudget;
 use antiradiance::dense::solve_dense;
 use antiradiance::direct::solve_hierarchical_direct;
 use antiradiance::hierarchical::{link_params, Prepared};
@@ -78,7 +79,9 @@ fn stages(c: &mut Criterion) {
                         &link_params(&options),
                         &options.coupling(),
                         false,
+                        &LinkBudget::unlimited(options.bins),
                     )
+                    .unwrap()
                 },
                 criterion::BatchSize::LargeInput,
             )
@@ -87,11 +90,11 @@ fn stages(c: &mut Criterion) {
             max_iterations: 1,
             ..options.clone()
         };
-        let mut prepared = Prepared::new(&patches, &one, false);
+        let mut prepared = Prepared::new(&patches, &one, false).unwrap();
         group.bench_function("hierarchical_one_iteration", |b| {
             b.iter(|| prepared.solve(&patches, &Progress::hidden()))
         });
-        let mut prepared = Prepared::new(&patches, &options, false);
+        let mut prepared = Prepared::new(&patches, &options, false).unwrap();
         group.bench_function("hierarchical_full_solve", |b| {
             b.iter(|| prepared.solve(&patches, &Progress::hidden()))
         });
@@ -99,19 +102,25 @@ fn stages(c: &mut Criterion) {
             BenchmarkId::new("hierarchical_end_to_end", "build+links+solve"),
             |b| {
                 b.iter(|| {
-                    Prepared::new(&patches, &options, false).solve(&patches, &Progress::hidden())
+                    Prepared::new(&patches, &options, false)
+                        .unwrap()
+                        .solve(&patches, &Progress::hidden())
                 })
             },
         );
         // What the CLI's default runs (load and output aside): the above plus exact direct light.
         group.bench_function(
             BenchmarkId::new("hierarchical_end_to_end", "with_direct_light"),
-            |b| b.iter(|| solve_hierarchical_direct(&patches, &options, &Progress::hidden())),
+            |b| {
+                b.iter(|| {
+                    solve_hierarchical_direct(&patches, &options, &Progress::hidden()).unwrap()
+                })
+            },
         );
         // The dense solver's full solve takes minutes at this size: one sweep (near-pair cache
         // plus one streamed pass over all pairs) is measured; multiply by the iteration count.
         group.bench_function("dense_one_iteration", |b| {
-            b.iter(|| solve_dense(&patches, &one, &Progress::hidden()))
+            b.iter(|| solve_dense(&patches, &one, &Progress::hidden()).unwrap())
         });
         group.finish();
     }

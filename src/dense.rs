@@ -6,10 +6,14 @@
 //! are computed once and cached. It is the oracle for the
 //! hierarchical solver (which uses the very same [`couple`] on its finest links).
 
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+
 use rayon::prelude::*;
 
 use crate::bins::Bins;
 use crate::health::{self, Guard};
+use crate::budget::{self, Budget, MemoryStats};
+use crate::error::Result;
 use crate::mesh::Patches;
 use crate::model;
 use crate::progress::Progress;
@@ -31,12 +35,36 @@ type NearList = Vec<(u32, Coupling)>;
 /// [`finish`]; a solve that fails stops there with `stats.failure` set ([`crate::health`]). In
 /// a convex enclosure a receiver's form-factor row above 1 + [`health::ROW_SUM_TOLERANCE`] is
 /// scaled down to 1 (`stats.capped_rows`).
-pub fn solve_dense(patches: &Patches, options: &SolverOptions, progress: &Progress) -> Solution {
+///
+/// Errors: [`crate::Error::Memory`] when its arrays ([`budget::dense_bytes`]) or its cached near
+/// pairs (counted while they are computed) do not fit the memory limit
+/// ([`SolverOptions::memory_limit_bytes`]): the dense solver is the oracle and is never
+/// coarsened.
+pub fn solve_dense(
+    patches: &Patches,
+    options: &SolverOptions,
+    progress: &Progress,
+) -> Result<Solution> {
     let bins = Bins::new(options.bins);
     let nb = bins.len();
     let n = patches.len();
     let params = options.coupling();
     let back = crate::model::back_blocking(patches, options);
+    let budget = Budget::start(options.memory_limit_bytes);
+    let estimate = budget::dense_bytes(n as u64, options.bins, options.near_quadrature);
+    let refuse = |bytes: u64| {
+        budget.does_not_fit(
+            &format!(
+                "the dense solver for {n} patches and {0}x{0} bins",
+                options.bins
+            ),
+            bytes,
+            "use the hierarchical solver (--solver hierarchical) or raise --memory-limit",
+        )
+    };
+    if !budget.fits(estimate) {
+        return Err(refuse(estimate));
+    }
     let geoms: Vec<Option<PatchGeom>> = (0..n)
         .map(|p| {
             patches.active[p].then(|| {
@@ -75,6 +103,10 @@ pub fn solve_dense(patches: &Patches, options: &SolverOptions, progress: &Progre
 
     // Near pairs: computed once, kept per receiver as (sender, entries). Each receiver's
     // quadrature is fixed by its nearest exchanging sender (one set of points per receiver).
+    // Their bytes are counted as they are made; past the budget the rest are skipped and the
+    // solve refused.
+    let near_bytes = AtomicU64::new(0);
+    let over = AtomicBool::new(false);
     let (receivers, near): (Vec<Option<Receiver>>, Vec<NearList>) = geoms
         .par_iter()
         .enumerate()
@@ -82,6 +114,9 @@ pub fn solve_dense(patches: &Patches, options: &SolverOptions, progress: &Progre
             let Some(rg) = rg else {
                 return (None, Vec::new());
             };
+            if over.load(Ordering::Relaxed) {
+                return (None, Vec::new());
+            }
             let near_senders: Vec<usize> = active
                 .iter()
                 .copied()
@@ -104,9 +139,21 @@ pub fn solve_dense(patches: &Patches, options: &SolverOptions, progress: &Progre
                     list.push((s as u32, coupling.clone()));
                 }
             }
+            let bytes: u64 = list
+                .iter()
+                .map(|(_, c)| budget::dense_near_pair_bytes(c.len()))
+                .sum();
+            let held = near_bytes.fetch_add(bytes, Ordering::Relaxed) + bytes;
+            if !budget.fits(estimate + held) {
+                over.store(true, Ordering::Relaxed);
+            }
             (Some(receiver), list)
         })
         .unzip();
+    let near_bytes = near_bytes.into_inner();
+    if over.into_inner() {
+        return Err(refuse(estimate + near_bytes));
+    }
     stats.solver_bytes += near
         .iter()
         .map(|l| (l.len() * std::mem::size_of::<(u32, Coupling)>()) as u64)
@@ -211,13 +258,26 @@ pub fn solve_dense(patches: &Patches, options: &SolverOptions, progress: &Progre
         }
     }
     stats.residual = convergence.residual;
-    finish(
+    stats.elements = active.len();
+    stats.memory = Some(MemoryStats {
+        limit_bytes: budget.limit,
+        base_bytes: budget.base,
+        estimate_bytes: estimate + near_bytes,
+        peak_bytes: crate::memory::peak_rss_bytes(),
+        coarsened: Vec::new(),
+        attempts: 0,
+        epsilon: 0.0,
+        bins: options.bins,
+        split_depth: 0,
+        discarded_seconds: 0.0,
+    });
+    Ok(finish(
         patches,
         radiance,
         stats,
         options.clamp_negative,
         options.antiradiance,
-    )
+    ))
 }
 
 /// What one receiver's gather in a dense sweep reports (`Default` is for fields left unset).

@@ -41,7 +41,9 @@ use std::f64::consts::PI;
 use glam::DVec3;
 use rayon::prelude::*;
 
+use crate::budget::{self, Budget};
 use crate::dense;
+use crate::error::Result;
 use crate::geometry::{self, plane_tol, PLANE_EPS};
 use crate::hierarchical::{Element, Prepared};
 use crate::mesh::Patches;
@@ -120,7 +122,22 @@ struct Emitters {
 }
 
 impl Emitters {
-    /// The active patches that emit in some channel (positive area x largest channel).
+    /// True when patch `p` is an emitter: active and emitting in some channel (positive area x
+    /// largest channel).
+    fn emits(patches: &Patches, p: usize) -> bool {
+        let e = patches.emission[p];
+        let w = patches.area[p] * e[0].max(e[1]).max(e[2]);
+        patches.active[p] && w > 0.0 && w.is_finite()
+    }
+
+    /// The number of emitters [`Emitters::new`] finds.
+    fn count(patches: &Patches) -> usize {
+        (0..patches.len())
+            .filter(|&p| Emitters::emits(patches, p))
+            .count()
+    }
+
+    /// The active patches that emit in some channel.
     fn new(patches: &Patches) -> Emitters {
         let mut emitters = Emitters {
             patch: Vec::new(),
@@ -129,8 +146,7 @@ impl Emitters {
         };
         for p in 0..patches.len() {
             let e = patches.emission[p];
-            let w = patches.area[p] * e[0].max(e[1]).max(e[2]);
-            if patches.active[p] && w > 0.0 && w.is_finite() {
+            if Emitters::emits(patches, p) {
                 emitters.patch.push(p as u32);
                 emitters
                     .geom
@@ -1010,54 +1026,114 @@ fn patch_receivers(patches: &Patches) -> Vec<Element> {
         .collect()
 }
 
+/// The coarsening step recorded when the exact direct light does not fit the memory limit.
+pub const DIRECT_LIGHT_OFF: &str = "exact direct light off";
+
+/// The direct light of `patches` for `receivers` receivers when it fits `spare` bytes
+/// ([`budget::direct_light_bytes`]: the shadow-ray scene and emitter groups are estimated
+/// before they are built, each receiver's lights once the groups are known), with its estimate;
+/// `None` when it does not fit.
+fn direct_within(
+    patches: &Patches,
+    receivers: usize,
+    spare: u64,
+) -> Option<(DirectLight<'_>, u64)> {
+    let (p, e, r) = (
+        patches.len() as u64,
+        Emitters::count(patches) as u64,
+        receivers as u64,
+    );
+    if budget::direct_light_bytes(p, e, 0, Some(0)) > spare {
+        return None;
+    }
+    let direct = DirectLight::new(patches, receivers);
+    let bytes = budget::direct_light_bytes(p, e, r, Some(direct.group_count() as u64));
+    (bytes <= spare).then_some((direct, bytes))
+}
+
 /// Solves the scene with the hierarchical solver and exact direct light: the reflected direct
 /// light `D` per element (shadow rays) is the source of the antiradiance solve, which then
-/// carries the indirect bounces only; the emission is added back at the end.
+/// carries the indirect bounces only; the emission is added back at the end. The direct light
+/// is skipped (`stats.direct_light_skipped`) when it would cost more than the work budget
+/// ([`DirectLight::over_budget`]) or than the memory the model leaves (then
+/// [`DIRECT_LIGHT_OFF`] is in `stats.memory.coarsened`).
 /// Preconditions: `options.validate()` passed (`options.direct_light` itself is not read).
+///
+/// Errors: [`crate::Error::Memory`] as [`Prepared::new`].
 pub fn solve_hierarchical_direct(
     patches: &Patches,
     options: &SolverOptions,
     progress: &Progress,
-) -> Solution {
-    let mut prepared = Prepared::new(patches, options, false);
+) -> Result<Solution> {
+    let mut prepared = Prepared::new(patches, options, false)?;
     let receivers: Vec<Element> = prepared.elements().collect();
     let t_direct = std::time::Instant::now();
-    let direct = DirectLight::new(patches, receivers.len());
-    if direct.over_budget(receivers.len()) {
+    let skip = |mut prepared: Prepared, step: Option<&str>| {
+        prepared.note_memory(0, step);
         let (mut solution, _) = prepared.solve(patches, progress);
         solution.stats.direct_light_skipped = true;
-        return solution;
+        solution
+    };
+    let Some((direct, bytes)) = direct_within(patches, receivers.len(), prepared.spare_bytes())
+    else {
+        return Ok(skip(prepared, Some(DIRECT_LIGHT_OFF)));
+    };
+    if direct.over_budget(receivers.len()) {
+        drop(direct);
+        return Ok(skip(prepared, None));
     }
+    prepared.note_memory(bytes, None);
     let source = direct.reflected(&receivers, progress);
+    drop(direct);
     prepared.timings.direct = t_direct.elapsed().as_secs_f64();
     let (reflected, state) = prepared.solve_with_source(patches, &source, None, progress);
     // `reflected` is R clamped and scaled; B is formed from the unclamped element values.
     let radiance = add_emission(patches, &receivers, state.radiance());
-    finish(
+    Ok(finish(
         patches,
         radiance,
         sweep_checks_only(reflected.stats),
         options.clamp_negative,
         options.antiradiance,
-    )
+    ))
 }
 
 /// Solves the scene with the dense solver and exact direct light (the reflected direct light is
 /// computed per patch and is the dense solve's source; the emission is added back at the end).
+/// Skipped as in [`solve_hierarchical_direct`], the memory left being what the dense solver's
+/// estimate leaves.
 /// Preconditions: `options.validate()` passed (`options.direct_light` itself is not read).
+///
+/// Errors: [`crate::Error::Memory`] as [`dense::solve_dense`].
 pub fn solve_dense_direct(
     patches: &Patches,
     options: &SolverOptions,
     progress: &Progress,
-) -> Solution {
+) -> Result<Solution> {
     let receivers = patch_receivers(patches);
-    let direct = DirectLight::new(patches, receivers.len());
-    if direct.over_budget(receivers.len()) {
-        let mut solution = dense::solve_dense(patches, options, progress);
+    let budget = Budget::start(options.memory_limit_bytes);
+    // The dense solve, and the copy of the patches that carries its source.
+    let dense_bytes =
+        budget::dense_bytes(patches.len() as u64, options.bins, options.near_quadrature)
+            + patches.len() as u64 * 256;
+    let skip = |step: Option<&str>| -> Result<Solution> {
+        let mut solution = dense::solve_dense(patches, options, progress)?;
         solution.stats.direct_light_skipped = true;
-        return solution;
+        if let (Some(step), Some(memory)) = (step, solution.stats.memory.as_mut()) {
+            memory.coarsened.push(step.to_string());
+        }
+        Ok(solution)
+    };
+    let Some((direct, _)) = direct_within(patches, receivers.len(), budget.spare(dense_bytes))
+    else {
+        return skip(Some(DIRECT_LIGHT_OFF));
+    };
+    if direct.over_budget(receivers.len()) {
+        drop(direct);
+        return skip(None);
     }
     let source = direct.reflected(&receivers, progress);
+    drop(direct);
     let mut with_source = patches.clone();
     with_source.emission = vec![[0.0; 3]; patches.len()];
     for (r, d) in receivers.iter().zip(&source) {
@@ -1067,7 +1143,7 @@ pub fn solve_dense_direct(
         clamp_negative: false,
         ..options.clone()
     };
-    let reflected = dense::solve_dense(&with_source, &unclamped, progress);
+    let reflected = dense::solve_dense(&with_source, &unclamped, progress)?;
     // Back to normalized units (the solution was scaled by the scene's emission scale).
     let inv_scale = 1.0 / patches.emission_scale;
     let patch_reflected: Vec<[f64; 3]> = receivers
@@ -1075,13 +1151,13 @@ pub fn solve_dense_direct(
         .map(|r| reflected.patch_radiance[r.patch as usize].map(|x| x * inv_scale))
         .collect();
     let radiance = add_emission(patches, &receivers, &patch_reflected);
-    finish(
+    Ok(finish(
         patches,
         radiance,
         sweep_checks_only(reflected.stats),
         options.clamp_negative,
         options.antiradiance,
-    )
+    ))
 }
 
 /// The statistics of the indirect solve without the checks of its result (bound, negative

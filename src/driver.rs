@@ -32,7 +32,7 @@ use crate::render::{self, CameraOptions, Shading};
 use crate::scene::{self, Scene, SceneOptions};
 use crate::solution::{self, Solution, SolveStats};
 use crate::solve::SolverOptions;
-use crate::{dense, direct, geometry, hierarchical, memory, output};
+use crate::{budget, dense, direct, geometry, hierarchical, memory, output};
 
 /// Largest number of patches `--max-edge` may split a scene into (a guard against a typo such
 /// as a length in the wrong unit, which would otherwise exhaust memory before any message; a
@@ -196,6 +196,22 @@ pub struct SolverArgs {
     /// No exact direct light: antiradiance for every bounce (the fast preset's choice).
     #[arg(long)]
     pub no_direct_light: bool,
+    /// Most memory the process may hold while solving: bytes, or with a suffix K, M, G, T
+    /// (powers of 1024: 512M, 4G, 1.5G). A model that would not fit is coarsened (with a
+    /// warning); one that cannot fit even so is an error before anything large is allocated.
+    /// Default: half the machine's physical memory.
+    #[arg(
+        long,
+        value_name = "SIZE",
+        value_parser = parse_memory_limit,
+        allow_hyphen_values = true
+    )]
+    pub memory_limit: Option<u64>,
+}
+
+/// Parses `--memory-limit SIZE` ([`budget::parse_size`]).
+pub fn parse_memory_limit(text: &str) -> std::result::Result<u64, String> {
+    budget::parse_size(text)
 }
 
 impl SolverArgs {
@@ -226,6 +242,9 @@ impl SolverArgs {
         }
         if self.no_direct_light {
             options.direct_light = false;
+        }
+        if let Some(limit) = self.memory_limit {
+            options.memory_limit_bytes = limit;
         }
         options.validate()?;
         Ok(options)
@@ -562,14 +581,17 @@ pub fn load(args: &SceneArgs, timings: &mut Timings) -> Result<Loaded> {
 
 /// Stage 4 for the antiradiance solvers, with a progress bar unless `quiet`.
 /// Precondition: `options.validate()` passed.
+///
+/// Errors: [`Error::Memory`] when the solve does not fit `options.memory_limit_bytes` (see
+/// [`crate::budget`]).
 pub fn run_solver(
     kind: SolverKind,
     patches: &Patches,
     options: &SolverOptions,
     quiet: bool,
-) -> Solution {
+) -> Result<Solution> {
     let progress = Progress::new(kind.name(), options.max_iterations as u64, !quiet);
-    let mut solution = match (kind, options.direct_light) {
+    let solution = match (kind, options.direct_light) {
         (SolverKind::Dense, false) => dense::solve_dense(patches, options, &progress),
         (SolverKind::Hierarchical, false) => {
             hierarchical::solve_hierarchical(patches, options, &progress)
@@ -580,24 +602,26 @@ pub fn run_solver(
         }
     };
     progress.finish();
+    let mut solution = solution?;
     // Degenerate and duplicate triangles' patches get the values the model fixes for them,
     // whatever the solver left there.
     solution.settle_inactive(patches);
-    solution
+    Ok(solution)
 }
 
-/// The warnings of one antiradiance solve: iteration cap ([`cap_warning`]), skipped direct
-/// light ([`direct_light_warning`]), capped form-factor rows ([`capped_rows_warning`]) and
-/// much negative radiance ([`negative_warning`]). A failed solve is not warned about here: it
-/// is an error ([`SolveStats::check`]).
+/// The warnings of one antiradiance solve: memory limit ([`memory_warning`]), iteration cap
+/// ([`cap_warning`]), skipped direct light ([`direct_light_warning`]), capped form-factor rows
+/// ([`capped_rows_warning`]) and much negative radiance ([`negative_warning`]). A failed solve
+/// is not warned about here: it is an error ([`SolveStats::check`]).
 pub fn solve_warnings(
     kind: SolverKind,
     stats: &SolveStats,
     options: &SolverOptions,
     patches: &Patches,
 ) -> Vec<String> {
-    cap_warning(kind.name(), stats, options, patches)
+    memory_warning(stats.memory.as_ref())
         .into_iter()
+        .chain(cap_warning(kind.name(), stats, options, patches))
         .chain(direct_light_warning(stats, options))
         .chain(capped_rows_warning(kind.name(), stats))
         .chain(negative_warning(kind.name(), stats, options))
@@ -639,10 +663,31 @@ pub fn negative_warning(
     })
 }
 
+/// The warning for a solve that was changed to fit its memory limit (`None` when nothing was):
+/// the limit, what was coarsened, and the estimate of the model solved.
+pub fn memory_warning(memory: Option<&budget::MemoryStats>) -> Option<String> {
+    let m = memory?;
+    if m.coarsened.is_empty() {
+        return None;
+    }
+    Some(format!(
+        "the model was coarsened to fit the memory limit of {} (--memory-limit): {}; its estimate is {} beside the {} in use before the solve; the result is less accurate than asked",
+        format_bytes(m.limit_bytes),
+        m.coarsened.join(", "),
+        format_bytes(m.estimate_bytes),
+        format_bytes(m.base_bytes)
+    ))
+}
+
 /// The warning for a solve that was asked for exact direct light but skipped it because the
-/// scene's emitters were over [`direct::DIRECT_LIGHT_BUDGET`] (`None` otherwise).
+/// scene's emitters were over [`direct::DIRECT_LIGHT_BUDGET`] (`None` otherwise; a direct light
+/// skipped to fit the memory limit is in [`memory_warning`]).
 pub fn direct_light_warning(stats: &SolveStats, options: &SolverOptions) -> Option<String> {
-    (options.direct_light && stats.direct_light_skipped).then(|| {
+    let for_memory = stats
+        .memory
+        .as_ref()
+        .is_some_and(|m| m.coarsened.iter().any(|c| c == direct::DIRECT_LIGHT_OFF));
+    (options.direct_light && stats.direct_light_skipped && !for_memory).then(|| {
         format!(
             "exact direct light skipped: receivers x emitter groups is over {:.0e} or the shadow rays over {:.0e}; antiradiance carried every bounce (--no-direct-light silences this)",
             direct::DIRECT_LIGHT_BUDGET as f64,
@@ -813,11 +858,42 @@ impl Report {
     }
 }
 
-/// Solver statistics as they appear in reports. Non-finite numbers become 0 rather than null,
-/// except the residual of a failed solve (null when it was NaN or infinite: that is what
-/// failed); `failure` is null for a healthy solve, else the failure's figures with its one-line
-/// `message`.
-pub fn stats_json(stats: &SolveStats) -> Value {
+/// What a mesh cost a solve (the report's `stats.mesh`): the shapes of the input triangles,
+/// the elements solved and the links per input triangle.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct MeshStats {
+    /// Aspect ratios (longest edge squared over area) and area range of the non-degenerate
+    /// input triangles ([`Scene::shapes`]).
+    #[serde(flatten)]
+    pub shapes: scene::TriangleShapes,
+    /// Elements solved: the hierarchical solver's leaf triangles after its splits, the dense
+    /// solver's patches; 0 for the path tracer.
+    pub elements: usize,
+    /// Links per non-degenerate input triangle (0 for the path tracer).
+    pub links_per_triangle: f64,
+}
+
+impl MeshStats {
+    /// The figures of a solve of a loaded scene.
+    pub fn of(loaded: &Loaded, stats: &SolveStats) -> MeshStats {
+        let shapes = loaded.scene.shapes();
+        MeshStats {
+            shapes,
+            elements: stats.elements,
+            links_per_triangle: if shapes.triangles > 0 {
+                stats.links as f64 / shapes.triangles as f64
+            } else {
+                0.0
+            },
+        }
+    }
+}
+
+/// Solver statistics as they appear in reports, with what the mesh cost (`mesh`, see
+/// [`MeshStats`]). Non-finite numbers become 0 rather than null, except the residual of a
+/// failed solve (null when it was NaN or infinite: that is what failed); `failure` is null for
+/// a healthy solve, else the failure's figures with its one-line `message`.
+pub fn stats_json(stats: &SolveStats, loaded: &Loaded) -> Value {
     let mut s = stats.clone();
     if s.failure.is_none() {
         s.residual = solution::sanitize(s.residual);
@@ -829,6 +905,10 @@ pub fn stats_json(stats: &SolveStats) -> Value {
     let mut value = serde_json::to_value(s).unwrap_or(Value::Null);
     if let (Some(f), Some(Value::Object(failure))) = (&stats.failure, value.get_mut("failure")) {
         failure.insert("message".into(), Value::String(f.to_string()));
+    }
+    if let Value::Object(map) = &mut value {
+        let mesh = serde_json::to_value(MeshStats::of(loaded, stats)).unwrap_or(Value::Null);
+        map.insert("mesh".into(), mesh);
     }
     value
 }
@@ -859,7 +939,7 @@ pub fn solve(args: &SolveArgs) -> Result<()> {
     let loaded = load(&args.scene, &mut timings)?;
     let solution = timed(&mut timings.solve, || {
         run_solver(args.solver, &loaded.patches, &options, args.quiet)
-    });
+    })?;
     let cap = solve_warnings(args.solver, &solution.stats, &options, &loaded.patches);
     for w in &cap {
         eprintln!("warning: {w}");
@@ -887,7 +967,7 @@ pub fn solve(args: &SolveArgs) -> Result<()> {
                     "scene_options": args.scene.to_json(),
                 }),
             )
-            .insert("stats", stats_json(&solution.stats))
+            .insert("stats", stats_json(&solution.stats, &loaded))
             .finish(&timings, peak);
         report.write(path)?;
     }
@@ -948,7 +1028,7 @@ pub fn reference(args: &ReferenceArgs) -> Result<()> {
                     "scene_options": args.scene.to_json(),
                 }),
             )
-            .insert("stats", stats_json(&solution.stats))
+            .insert("stats", stats_json(&solution.stats, &loaded))
             .finish(&timings, peak);
         report.write(path)?;
     }
@@ -1019,6 +1099,7 @@ pub fn compare(args: &CompareArgs) -> Result<()> {
         let (solution, seconds, delta) = measured(&mut overall_peak, || {
             run_solver(kind, &loaded.patches, &options, args.quiet)
         });
+        let solution = solution?;
         timings.solve += seconds;
         for w in solve_warnings(kind, &solution.stats, &options, &loaded.patches) {
             eprintln!("warning: {w}");
@@ -1051,7 +1132,7 @@ pub fn compare(args: &CompareArgs) -> Result<()> {
             CompareRun {
                 seconds: *seconds,
                 peak_memory_delta_bytes: *delta,
-                stats: stats_json(&solution.stats),
+                stats: stats_json(&solution.stats, &loaded),
                 error_vs_reference: reference
                     .as_ref()
                     .map(|r| error_against(&loaded.scene, solution, &r.0)),
@@ -1086,7 +1167,7 @@ pub fn compare(args: &CompareArgs) -> Result<()> {
                 "seed": ro.seed,
                 "seconds": seconds,
                 "peak_memory_delta_bytes": delta,
-                "stats": stats_json(&solution.stats),
+                "stats": stats_json(&solution.stats, &loaded),
             }),
             _ => Value::Null,
         };

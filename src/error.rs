@@ -43,6 +43,10 @@ pub enum Error {
     /// and the figures.
     #[error("{0}")]
     Solve(String),
+    /// A solve does not fit its memory limit, even coarsened (see [`crate::budget`]); raised
+    /// before the large arrays are allocated.
+    #[error("{0}")]
+    Memory(String),
 }
 
 impl Error {

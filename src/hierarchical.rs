@@ -18,6 +18,10 @@ use rayon::prelude::*;
 use crate::accelerate::Anderson;
 use crate::bins::Bins;
 use crate::health::{self, Guard};
+use crate::budget::{
+    self, Budget, HierarchicalCosts, LinkBudget, MemoryStats, ModelCounts, OverBudget,
+};
+use crate::error::Result;
 use crate::hierarchy::{ClusterTree, NONE};
 use crate::links::{self, ClusterLink, LinkParams, Links};
 use crate::mesh::Patches;
@@ -73,8 +77,13 @@ pub struct Prepared {
     convex: bool,
     /// True when antiradiance is propagated: asked for and the scene is not convex.
     use_anti: bool,
-    /// Solver options the links were refined for.
+    /// Solver options the links were refined for: those asked for, with the epsilon and bins
+    /// of the model that fitted the memory limit ([`Prepared::memory`]).
     pub options: SolverOptions,
+    /// The memory budget of the solves.
+    budget: Budget,
+    /// What the memory budget did: limit, estimate, what was coarsened.
+    memory: MemoryStats,
     /// Build timings.
     pub timings: HierarchyTimings,
 }
@@ -144,9 +153,105 @@ pub fn link_params(options: &SolverOptions) -> LinkParams {
     }
 }
 
+/// Colour channels the sweeps of `patches` need when their source is their emission or the
+/// direct light reflected by their albedos: 1 when every albedo and emission is grey, else 3.
+fn channels_needed(patches: &Patches) -> usize {
+    let grey = (0..patches.len())
+        .all(|p| model::is_grey(patches.albedo[p]) && model::is_grey(patches.emission[p]));
+    if grey {
+        1
+    } else {
+        3
+    }
+}
+
 impl Prepared {
-    /// Builds the tree and refines the links for `patches`.
-    pub fn new(patches: &Patches, options: &SolverOptions, record_culled: bool) -> Prepared {
+    /// Builds the tree and refines the links for `patches` within the memory limit of
+    /// `options` ([`SolverOptions::memory_limit_bytes`], see [`crate::budget`]): a model whose
+    /// estimate does not fit is coarsened step by step ([`budget::coarser`]; the pair cache is
+    /// left out first), and [`Prepared::memory`] says what was changed. `record_culled` keeps
+    /// the culled pairs (for [`links::validate`]).
+    ///
+    /// Errors: [`crate::Error::Memory`] when even the coarsest model does not fit (raised
+    /// before its large arrays are allocated).
+    pub fn new(
+        patches: &Patches,
+        options: &SolverOptions,
+        record_culled: bool,
+    ) -> Result<Prepared> {
+        let budget = Budget::start(options.memory_limit_bytes);
+        let tree_bytes = HierarchicalCosts::tree_bytes(patches.len() as u64);
+        if !budget.fits(tree_bytes) {
+            return Err(budget.does_not_fit(
+                &format!("the cluster tree of {} patches", patches.len()),
+                tree_bytes,
+                "raise --memory-limit",
+            ));
+        }
+        let channels = channels_needed(patches);
+        let mut model = options.clone();
+        let mut coarsened = Vec::new();
+        let mut attempts = 0;
+        let mut discarded_seconds = 0.0;
+        loop {
+            let link_budget = LinkBudget {
+                costs: HierarchicalCosts::new(model.bins, channels),
+                budget,
+                patches: patches.len() as u64,
+            };
+            attempts += 1;
+            let t_attempt = Instant::now();
+            let over = match Prepared::build(patches, &model, record_culled, &link_budget) {
+                Ok(mut prepared) => {
+                    coarsened.append(&mut prepared.memory.coarsened);
+                    prepared.memory = MemoryStats {
+                        limit_bytes: budget.limit,
+                        base_bytes: budget.base,
+                        coarsened,
+                        attempts,
+                        epsilon: model.epsilon,
+                        bins: model.bins,
+                        split_depth: model.split_depth,
+                        discarded_seconds,
+                        ..prepared.memory
+                    };
+                    return Ok(prepared);
+                }
+                Err(over) => over,
+            };
+            discarded_seconds += t_attempt.elapsed().as_secs_f64();
+            match budget::coarser(&model) {
+                Some((next, step)) => {
+                    coarsened.push(step);
+                    model = next;
+                }
+                None => {
+                    return Err(budget.does_not_fit(
+                        &format!(
+                            "the hierarchical model of {} patches even at its coarsest (epsilon {}, split depth {}, {}x{} bins, no pair cache)",
+                            patches.len(),
+                            model.epsilon,
+                            model.split_depth,
+                            model.bins,
+                            model.bins
+                        ),
+                        over.estimate,
+                        "raise --memory-limit",
+                    ))
+                }
+            }
+        }
+    }
+
+    /// One attempt of [`Prepared::new`] with the model of `options`: tree, links, element
+    /// arrays, groups, live bins and (when it fits) the pair cache, or [`OverBudget`] as soon
+    /// as the estimate exceeds `link_budget`.
+    fn build(
+        patches: &Patches,
+        options: &SolverOptions,
+        record_culled: bool,
+        link_budget: &LinkBudget,
+    ) -> std::result::Result<Prepared, OverBudget> {
         let bins = Bins::new(options.bins);
         let t0 = Instant::now();
         let mut tree = ClusterTree::build(patches);
@@ -159,7 +264,8 @@ impl Prepared {
             &link_params(options),
             &options.coupling(),
             record_culled,
-        );
+            link_budget,
+        )?;
         let t2 = Instant::now();
         debug_assert!(tree.validate().is_ok(), "{:?}", tree.validate());
         let mut prepared = Prepared {
@@ -180,6 +286,8 @@ impl Prepared {
             links,
             bins,
             options: options.clone(),
+            budget: link_budget.budget,
+            memory: MemoryStats::default(),
             timings: HierarchyTimings {
                 tree: (t1 - t0).as_secs_f64(),
                 links: (t2 - t1).as_secs_f64(),
@@ -210,14 +318,82 @@ impl Prepared {
         prepared.albedo_grey = prepared.elem_albedo.iter().all(|&a| model::is_grey(a));
         prepared.convex = model::is_convex_enclosure(&prepared.tree);
         prepared.use_anti = options.antiradiance && !prepared.convex;
-        prepared.pairs = PairCache::build(&prepared, options.pair_cache_mb as u64 * 1_000_000);
-        prepared.live = if prepared.use_anti {
-            LiveBins::build(&prepared)
-        } else {
-            LiveBins::empty(prepared.element_count(), prepared.bins.len())
+        // What the model holds; the stored bins are bounded by every bin until they are known.
+        let n = prepared.element_count() as u64;
+        let mut counts = ModelCounts {
+            patches: patches.len() as u64,
+            nodes: prepared.tree.nodes.len() as u64,
+            elements: n,
+            cluster_links: prepared.links.cluster.len() as u64,
+            exact_pairs: prepared.links.exact_sender.len() as u64,
+            entries: Some(prepared.links.exact_entries.len() as u64),
+            slots: Some(if prepared.use_anti {
+                n * prepared.bins.len() as u64
+            } else {
+                0
+            }),
+            groups: Some(prepared.groups.normal.len() as u64),
         };
+        let costs = &link_budget.costs;
+        let budget = &link_budget.budget;
+        let build_live = |prepared: &Prepared| {
+            if prepared.use_anti {
+                LiveBins::build(prepared)
+            } else {
+                LiveBins::empty(prepared.element_count(), prepared.bins.len())
+            }
+        };
+        // The pair cache, within its own budget and what the model leaves of the memory limit
+        // (with every bin counted; if it does not fit so, the live bins are found first and it
+        // is tried again with the bins the elements store).
+        let own = options.pair_cache_mb as u64 * 1_000_000;
+        let mut cache_dropped = false;
+        match PairCache::build(&prepared, own.min(budget.spare(costs.bytes(&counts)))) {
+            Ok(cache) => {
+                prepared.pairs = Some(cache);
+                prepared.live = build_live(&prepared);
+            }
+            Err(cache_bytes) => {
+                prepared.live = build_live(&prepared);
+                counts.slots = Some(prepared.live.slots() as u64);
+                if cache_bytes <= own {
+                    let spare = budget.spare(costs.bytes(&counts));
+                    prepared.pairs = PairCache::build(&prepared, own.min(spare)).ok();
+                    cache_dropped = prepared.pairs.is_none();
+                }
+            }
+        }
+        counts.slots = Some(prepared.live.slots() as u64);
+        let estimate = costs.bytes(&counts) + prepared.pairs.as_ref().map_or(0, PairCache::bytes);
+        if !budget.fits(estimate) {
+            return Err(OverBudget { estimate });
+        }
+        prepared.memory.estimate_bytes = estimate;
+        if cache_dropped {
+            prepared.memory.coarsened.push("pair cache off".into());
+        }
         prepared.timings.model = t2.elapsed().as_secs_f64();
-        prepared
+        Ok(prepared)
+    }
+
+    /// What the memory budget did: the limit, the estimate of the model solved, what was
+    /// coarsened to fit (the peak is filled in by each solve's statistics).
+    pub fn memory(&self) -> &MemoryStats {
+        &self.memory
+    }
+
+    /// Bytes the memory limit leaves beside the model's estimate (for the exact direct light).
+    pub(crate) fn spare_bytes(&self) -> u64 {
+        self.budget.spare(self.memory.estimate_bytes)
+    }
+
+    /// Counts `bytes` more in the model's estimate and, when something was left out to fit,
+    /// records it (`step`, e.g. `"exact direct light off"`).
+    pub(crate) fn note_memory(&mut self, bytes: u64, step: Option<&str>) {
+        self.memory.estimate_bytes += bytes;
+        if let Some(step) = step {
+            self.memory.coarsened.push(step.to_string());
+        }
     }
 
     /// Number of elements (leaf triangles after on-demand subdivision).
@@ -402,25 +578,36 @@ impl Prepared {
             reference_mass,
             patches.emission_scale,
         );
-        // Anderson acceleration when its history fits its budget; its residuals shrink faster
-        // than the plain sweep's contraction, so the remaining error is estimated with the
-        // largest albedo as the contraction bound instead.
+        // Anderson acceleration when its history (and the flat copies of the state it mixes)
+        // fits its own budget and what the model leaves of the memory limit; its residuals
+        // shrink faster than the plain sweep's contraction, so the remaining error is estimated
+        // with the largest albedo as the contraction bound instead.
         let state_len = (n + slots) * C;
         let depth = options.acceleration_depth;
-        let mut anderson = (depth > 0
-            && Anderson::bytes(state_len, depth) <= ACCELERATION_BUDGET_BYTES)
-            .then(|| {
-                let mut weight = Vec::with_capacity(state_len);
-                for &a in &self.elem_area {
-                    weight.extend(std::iter::repeat_n(a, C));
-                }
-                for e in 0..n {
-                    let w = self.elem_area[e] / nb as f64;
-                    let k = (live.start[e + 1] - live.start[e]) as usize * C;
-                    weight.extend(std::iter::repeat_n(w, k));
-                }
-                Anderson::new(depth, weight)
-            });
+        let history = Anderson::bytes(state_len, depth) + 16 * state_len as u64;
+        let mut memory = self.memory.clone();
+        let accelerate = depth > 0 && history <= ACCELERATION_BUDGET_BYTES;
+        let accelerate = if accelerate && history > self.budget.spare(memory.estimate_bytes) {
+            memory.coarsened.push("Anderson acceleration off".into());
+            false
+        } else {
+            if accelerate {
+                memory.estimate_bytes += history;
+            }
+            accelerate
+        };
+        let mut anderson = accelerate.then(|| {
+            let mut weight = Vec::with_capacity(state_len);
+            for &a in &self.elem_area {
+                weight.extend(std::iter::repeat_n(a, C));
+            }
+            for e in 0..n {
+                let w = self.elem_area[e] / nb as f64;
+                let k = (live.start[e + 1] - live.start[e]) as usize * C;
+                weight.extend(std::iter::repeat_n(w, k));
+            }
+            Anderson::new(depth, weight)
+        });
         if anderson.is_some() {
             convergence.contraction_bound = Some(rho_max);
             stats.extrapolations = 0;
@@ -614,6 +801,9 @@ impl Prepared {
             exact_links: self.links.exact_sender.len() as u64,
             refinement: self.links.stats.clone(),
         });
+        stats.elements = n;
+        memory.peak_bytes = crate::memory::peak_rss_bytes();
+        stats.memory = Some(memory);
         let solution = finish(
             patches,
             patch_radiance,
@@ -660,13 +850,16 @@ fn split_by_start<'a, T, I: Copy + Into<u64>>(
 }
 
 /// Solves the scene with the hierarchical solver. Preconditions: `options.validate()` passed.
+///
+/// Errors: [`crate::Error::Memory`] when the model does not fit the memory limit even
+/// coarsened ([`Prepared::new`]).
 pub fn solve_hierarchical(
     patches: &Patches,
     options: &SolverOptions,
     progress: &Progress,
-) -> Solution {
-    let mut prepared = Prepared::new(patches, options, false);
-    prepared.solve(patches, progress).0
+) -> Result<Solution> {
+    let mut prepared = Prepared::new(patches, options, false)?;
+    Ok(prepared.solve(patches, progress).0)
 }
 
 /// Nodes with at most this many elements pull per element; larger ones pull per normal group.
@@ -1107,9 +1300,9 @@ struct PairCache {
 }
 
 impl PairCache {
-    /// The cache for `prepared` (tree, links, element arrays and `use_anti` set), or `None` when
-    /// it would take more than `budget` bytes.
-    fn build(prepared: &Prepared, budget: u64) -> Option<PairCache> {
+    /// The cache for `prepared` (tree, links, element arrays and `use_anti` set), or the bytes
+    /// it would take when that is more than `budget`.
+    fn build(prepared: &Prepared, budget: u64) -> std::result::Result<PairCache, u64> {
         let (tree, links) = (&prepared.tree, &prepared.links);
         let n = prepared.element_count();
         let count = |e: usize| {
@@ -1126,7 +1319,7 @@ impl PairCache {
         let total: usize = counts.iter().sum();
         let bytes = (total * std::mem::size_of::<[f32; 2]>() + (n + 1) * 8) as u64;
         if bytes > budget {
-            return None;
+            return Err(bytes);
         }
         let mut start = Vec::with_capacity(n + 1);
         start.push(0);
@@ -1146,7 +1339,7 @@ impl PairCache {
                 });
             });
         let link_bin = links.cluster.iter().map(|l| l.bin).collect();
-        Some(PairCache {
+        Ok(PairCache {
             link_bin,
             start,
             factor,
@@ -1423,8 +1616,8 @@ mod tests {
                 acceleration_depth: 0,
                 ..SolverOptions::default()
             };
-            let mut pruned = Prepared::new(&patches, &options, false);
-            let mut every = Prepared::new(&patches, &options, false);
+            let mut pruned = Prepared::new(&patches, &options, false).unwrap();
+            let mut every = Prepared::new(&patches, &options, false).unwrap();
             every.live = LiveBins::every(every.element_count(), every.bins.len());
             assert!(pruned.live.slots() < every.live.slots());
             let (a, _) = pruned.solve(&patches, &Progress::hidden());

@@ -10,6 +10,7 @@
 
 pub mod accelerate;
 pub mod bins;
+pub mod budget;
 pub mod dense;
 pub mod direct;
 pub mod driver;

@@ -5,6 +5,7 @@
 use rayon::prelude::*;
 
 use crate::bins::Bins;
+use crate::budget::{self, LinkBudget, Meter, ModelCounts, OverBudget};
 use crate::hierarchy::ClusterTree;
 use crate::transport::{couple, Coupling, CouplingParams, Entry, PatchGeom, Receiver};
 
@@ -277,6 +278,8 @@ struct Traversal<'a> {
     record_culled: bool,
     /// Largest sender solid angle of a cluster link (steradians).
     limit: f64,
+    /// Counts what the round's tasks record against the memory budget.
+    meter: &'a Meter<'a>,
 }
 
 impl Traversal<'_> {
@@ -388,20 +391,40 @@ impl Traversal<'_> {
     /// Everything below `pairs`, in parallel, appended to `pieces`: each task walks its pairs
     /// depth first; the pieces are in the order of `pairs` (so what they hold, once
     /// concatenated, does not depend on scheduling).
+    ///
+    /// Every [`budget::CHECK_EVERY`] visits a task adds what it recorded to the meter; once the
+    /// meter is over the budget every task stops (what they hold is then discarded).
     fn run(&self, pairs: &[(u32, u32)], pieces: &mut Vec<Found>) {
         let found: Vec<Found> = pairs
             .par_iter()
             .fold(
-                || (Found::default(), Vec::new()),
-                |(mut found, mut stack), &pair| {
+                || (Found::default(), Vec::new(), (0, 0), 0usize),
+                |(mut found, mut stack, mut reported, mut visits), &pair| {
+                    if self.meter.is_over() {
+                        return (found, stack, reported, visits);
+                    }
                     stack.push(pair);
                     while let Some(p) = stack.pop() {
                         self.visit(p, &mut found, |q| stack.push(q));
+                        visits += 1;
+                        if visits % budget::CHECK_EVERY == 0 {
+                            let now = (found.cluster.len(), found.exact.len());
+                            let fits = self.meter.add(
+                                (now.0 - reported.0) as u64,
+                                (now.1 - reported.1) as u64,
+                                0,
+                                0,
+                            );
+                            reported = now;
+                            if !fits {
+                                stack.clear();
+                            }
+                        }
                     }
-                    (found, stack)
+                    (found, stack, reported, visits)
                 },
             )
-            .map(|(found, _)| found)
+            .map(|(found, ..)| found)
             .collect();
         pieces.extend(found);
     }
@@ -450,26 +473,43 @@ const PARALLEL_PAIRS: usize = 16384;
 ///
 /// The traversal runs in rounds: each walks its node pairs in parallel over a read-only tree,
 /// deferring the pairs that need a leaf triangle split; between rounds those leaves are split
-/// (in a fixed order) and the deferred pairs continue below them. At most
-/// `max_split_depth + 1` rounds.
+/// (in a fixed order) and the deferred pairs continue below them. At most `max_split_depth + 1`
+/// rounds.
+///
+/// Memory: the traversal counts the cluster links and exact pairs it records, the exact pairs
+/// are counted before they are coupled and the coupling entries while they are; as soon as the
+/// estimate of the finished model ([`budget::HierarchicalCosts::bytes`]) exceeds `budget`, the
+/// refinement stops and returns [`OverBudget`] (the tree is then left part-split: rebuild it
+/// before refining again).
 pub fn refine(
     tree: &mut ClusterTree,
     bins: &Bins,
     params: &LinkParams,
     coupling: &CouplingParams,
     record_culled: bool,
-) -> Links {
+    budget: &LinkBudget,
+) -> Result<Links, OverBudget> {
     let t_start = std::time::Instant::now();
     let mut pieces: Vec<Found> = Vec::new();
     let mut leaf_splits = 0;
     let mut pairs: Vec<(u32, u32)> = vec![(0, 0)];
     while !pairs.is_empty() {
+        let held = ModelCounts {
+            nodes: tree.nodes.len() as u64,
+            elements: tree.nodes.iter().filter(|n| n.is_leaf()).count() as u64,
+            cluster_links: pieces.iter().map(|p| p.cluster.len() as u64).sum(),
+            exact_pairs: pieces.iter().map(|p| p.exact.len() as u64).sum(),
+            ..ModelCounts::default()
+        };
+        budget.check(&held)?;
+        let meter = Meter::new(budget, held);
         let traversal = Traversal {
             tree,
             params,
             coupling,
             record_culled,
             limit: params.epsilon * bins.mean_solid_angle(),
+            meter: &meter,
         };
         // 1. Expand the top breadth first until there is work for every thread.
         let mut queue: std::collections::VecDeque<(u32, u32)> = pairs.drain(..).collect();
@@ -484,6 +524,9 @@ pub fn refine(
         pieces.push(top);
         // 2. Everything below, in parallel.
         traversal.run(queue.make_contiguous(), &mut pieces);
+        if meter.is_over() {
+            return Err(meter.over_budget());
+        }
         // 3. Split the leaves this round's deferred pairs wait for (in node order), and continue
         //    below them next round.
         let deferred: Vec<(u32, u32, bool)> = pieces[first_piece..]
@@ -555,6 +598,25 @@ pub fn refine(
     // then stands for all pairs of elements below its two nodes. Pairs as (receiver element,
     // sender element), grouped by receiver; each receiver integrates all its exact senders over
     // one fixed set of points.
+    let held = ModelCounts {
+        nodes: tree.nodes.len() as u64,
+        elements: tree.elements.len() as u64,
+        cluster_links: cluster.len() as u64,
+        exact_pairs: exact_pairs
+            .iter()
+            .map(|&(s, r)| {
+                let ((s0, s1), (r0, r1)) = (
+                    tree.nodes[s as usize].elements,
+                    tree.nodes[r as usize].elements,
+                );
+                u64::from(s1 - s0) * u64::from(r1 - r0)
+            })
+            .sum(),
+        entries: Some(0),
+        ..ModelCounts::default()
+    };
+    budget.check(&held)?;
+    let meter = Meter::new(budget, held);
     let mut exact_pairs: Vec<(u32, u32)> = exact_pairs
         .into_iter()
         .flat_map(|(s, r)| {
@@ -597,7 +659,7 @@ pub fn refine(
         .map_init(Coupling::new, |scratch, r| {
             let pairs = &exact_pairs[pair_start[r] as usize..pair_start[r + 1] as usize];
             let mut row = Row::default();
-            if pairs.is_empty() {
+            if pairs.is_empty() || meter.is_over() {
                 return row;
             }
             let receiver = Receiver::for_senders(
@@ -617,10 +679,14 @@ pub fn refine(
                 row.counts.push(scratch.len() as u32);
                 row.entries.extend_from_slice(scratch);
             }
+            meter.add(0, 0, pairs.len() as u64, row.entries.len() as u64);
             row
         })
         .collect();
     drop(exact_pairs);
+    if meter.is_over() {
+        return Err(meter.over_budget());
+    }
     let t_coupled = std::time::Instant::now();
     stats.couple_seconds = (t_coupled - t_traversed).as_secs_f64();
     let cluster: Vec<ClusterLink> = cluster
@@ -668,7 +734,7 @@ pub fn refine(
     }
     stats.assemble_seconds = t_coupled.elapsed().as_secs_f64();
     links.stats = stats;
-    links
+    Ok(links)
 }
 
 /// Checks on a small scene that every ordered pair of distinct elements is covered exactly once

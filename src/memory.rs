@@ -1,8 +1,9 @@
-//! Process memory figures for reports: peak and current resident set size.
+//! Process memory figures for reports and the memory budget: peak and current resident set
+//! size, and the machine's physical memory.
 //!
 //! On Linux they come from `/proc/self/status` (`VmHWM` is the peak resident set size, `VmRSS`
-//! the current one). Elsewhere every function returns `None` / `false`: a report then says the
-//! figure is unknown rather than guessing.
+//! the current one) and `/proc/meminfo` (`MemTotal`). Elsewhere every function returns `None` /
+//! `false`: a report then says the figure is unknown rather than guessing.
 
 /// Peak resident set size of this process so far, in bytes (`VmHWM`); `None` off Linux or when
 /// `/proc` cannot be read.
@@ -14,6 +15,20 @@ pub fn peak_rss_bytes() -> Option<u64> {
 /// `/proc` cannot be read.
 pub fn current_rss_bytes() -> Option<u64> {
     status_field("VmRSS")
+}
+
+/// Physical memory of the machine, in bytes (`MemTotal` of `/proc/meminfo`); `None` off Linux
+/// or when `/proc` cannot be read.
+pub fn physical_memory_bytes() -> Option<u64> {
+    #[cfg(target_os = "linux")]
+    {
+        let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+        parse_status_field(&text, "MemTotal")
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        None
+    }
 }
 
 /// Resets the peak resident set size to the current one, so that the peak of a later stage can
@@ -44,8 +59,9 @@ fn status_field(name: &str) -> Option<u64> {
     }
 }
 
-/// Parses the field `name` (e.g. `VmHWM`) of a `/proc/<pid>/status` text into bytes. The kernel
-/// writes these fields as `VmHWM:\t  123456 kB`; a value without a unit is taken as bytes.
+/// Parses the field `name` (e.g. `VmHWM`) of a `/proc/<pid>/status` or `/proc/meminfo` text into
+/// bytes. The kernel writes these fields as `VmHWM:\t  123456 kB`; a value without a unit is
+/// taken as bytes.
 pub fn parse_status_field(text: &str, name: &str) -> Option<u64> {
     text.lines().find_map(|line| {
         let rest = line.strip_prefix(name)?.strip_prefix(':')?;
@@ -71,6 +87,11 @@ mod tests {
         assert_eq!(parse_status_field(text, "VmRSS"), Some(1024 * 1024));
         assert_eq!(parse_status_field(text, "VmSwap"), None);
         assert_eq!(parse_status_field("VmHWM: x kB\n", "VmHWM"), None);
+        let meminfo = "MemTotal:       24576000 kB\nMemFree:         1000 kB\n";
+        assert_eq!(
+            parse_status_field(meminfo, "MemTotal"),
+            Some(24576000 * 1024)
+        );
     }
 
     #[test]

@@ -183,7 +183,7 @@ impl Relighter {
         for (t, &e) in scene.emission.iter().enumerate() {
             check_radiance(e, || format!("emission of scene triangle {t}"))?;
         }
-        let prepared = Prepared::new(&patches, options, false);
+        let prepared = Prepared::new(&patches, options, false)?;
         let material = (0..scene.len())
             .map(|t| scene.material.get(t).copied().flatten())
             .collect();
@@ -922,6 +922,10 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
         Relighter::from_patches(&loaded.scene, loaded.patches.clone(), &options)
     })?;
     let build_seconds = relighter.build_seconds();
+    let memory_warning = driver::memory_warning(Some(relighter.prepared().memory()));
+    if let Some(w) = &memory_warning {
+        eprintln!("warning: {w}");
+    }
 
     // The camera is resolved once, so every frame has the same view.
     let (eye, target) = render::resolve_view(relighter.patches(), &camera);
@@ -1025,6 +1029,7 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
     if let Some(path) = &args.report {
         let mut report = Report::new("relight", &args.scene.scene, &loaded);
         report
+            .add_warnings(memory_warning)
             .insert(
                 "parameters",
                 json!({
@@ -1051,6 +1056,7 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
                     "links": relighter.prepared().links.len(),
                     "elements": relighter.prepared().element_count(),
                     "solver_bytes": relighter.prepared().bytes(),
+                    "memory": relighter.prepared().memory(),
                 }),
             )
             .insert("summary", summary)

@@ -82,6 +82,29 @@ pub struct Scene {
     pub warnings: Vec<String>,
 }
 
+/// The shapes of a scene's non-degenerate triangles ([`Scene::shapes`]). The aspect ratio of a
+/// triangle is its longest edge squared over its area: 4/sqrt(3) = 2.31 for an equilateral
+/// triangle, 4 for half a square, about 2 / sin(smallest angle) for a sliver.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct TriangleShapes {
+    /// Non-degenerate triangles counted.
+    pub triangles: usize,
+    /// Median aspect ratio.
+    pub aspect_p50: f64,
+    /// 90th percentile of the aspect ratios (nearest rank).
+    pub aspect_p90: f64,
+    /// 99th percentile of the aspect ratios (nearest rank).
+    pub aspect_p99: f64,
+    /// Largest aspect ratio.
+    pub aspect_max: f64,
+    /// Smallest area, scene units squared.
+    pub area_min: f64,
+    /// Largest area, scene units squared.
+    pub area_max: f64,
+    /// `area_max / area_min` (1 when all areas are equal; 0 without triangles).
+    pub area_range: f64,
+}
+
 /// Largest `|sin|` of a triangle's corner angle below which it counts as degenerate (zero area).
 ///
 /// Relative to the triangle's own edges, so it does not depend on the scene's scale: a sliver with
@@ -184,6 +207,42 @@ impl Scene {
     /// Number of degenerate (zero-area) triangles.
     pub fn degenerate_count(&self) -> usize {
         (0..self.len()).filter(|&t| self.is_degenerate(t)).count()
+    }
+
+    /// The shapes of the non-degenerate triangles: their aspect ratios and area range (what
+    /// makes a mesh costly to refine: slivers and areas spanning orders of magnitude).
+    pub fn shapes(&self) -> TriangleShapes {
+        let mut aspect = Vec::with_capacity(self.len());
+        let (mut area_min, mut area_max) = (f64::INFINITY, 0.0f64);
+        for t in (0..self.len()).filter(|&t| !self.is_degenerate(t)) {
+            let corners = self.corners(t);
+            let area = self.area(t);
+            let edge = crate::geometry::longest_edge(&corners);
+            aspect.push(edge * edge / area);
+            area_min = area_min.min(area);
+            area_max = area_max.max(area);
+        }
+        aspect.sort_unstable_by(f64::total_cmp);
+        // Nearest rank: the smallest value with at least p of the values at or below it.
+        let rank = |p: f64| {
+            let k = ((p * aspect.len() as f64).ceil() as usize).clamp(1, aspect.len().max(1));
+            aspect.get(k - 1).copied().unwrap_or(0.0)
+        };
+        let triangles = aspect.len();
+        TriangleShapes {
+            triangles,
+            aspect_p50: rank(0.5),
+            aspect_p90: rank(0.9),
+            aspect_p99: rank(0.99),
+            aspect_max: aspect.last().copied().unwrap_or(0.0),
+            area_min: if triangles > 0 { area_min } else { 0.0 },
+            area_max,
+            area_range: if triangles > 0 {
+                area_max / area_min
+            } else {
+                0.0
+            },
+        }
     }
 
     /// For every triangle, the first earlier triangle it duplicates, if any: same three corner

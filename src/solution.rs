@@ -63,6 +63,12 @@ pub struct SolveStats {
     /// The hierarchical solver's links by kind, with the refinement's counts and times; `None`
     /// for the dense solver and the path tracer.
     pub link_stats: Option<LinkReport>,
+    /// Elements solved: the hierarchical solver's leaf triangles after its on-demand splits,
+    /// the dense solver's active patches; 0 for the path tracer.
+    pub elements: usize,
+    /// What the memory budget did (limit, estimate, what was coarsened, peak); `None` for the
+    /// path tracer.
+    pub memory: Option<crate::budget::MemoryStats>,
 }
 
 /// The links of a hierarchical solve by kind (`cluster + exact = links`), with what the

@@ -59,6 +59,18 @@ pub struct SolverOptions {
     /// state mixes ([`crate::accelerate`]). 0 gives plain Jacobi sweeps with the tail
     /// extrapolation. 1..8; 4 by default. The dense solver (the oracle) always sweeps plainly.
     pub acceleration_depth: usize,
+    /// Most resident memory the process may hold during a solve, bytes (`--memory-limit`); what
+    /// the process holds when the solve starts (scene, patches) counts against it. The solvers
+    /// estimate what they will allocate before they allocate it ([`crate::budget`]): a
+    /// hierarchical model that does not fit is coarsened (pair cache off, then epsilon doubled
+    /// up to [`crate::budget::MAX_COARSE_EPSILON`], then the split depth lowered to 0, then
+    /// fewer bins down to [`crate::budget::MIN_COARSE_BINS`] per side; see
+    /// [`crate::budget::coarser`]), the exact direct light is skipped when it
+    /// does not fit, and a solve that cannot fit even so (or a dense solve that does not fit)
+    /// ends with [`Error::Memory`] before allocating; each change is reported. At least 1;
+    /// by default half the machine's physical memory ([`crate::budget::default_memory_limit`]:
+    /// `MemTotal` of `/proc/meminfo`, 4 GiB where that is unknown).
+    pub memory_limit_bytes: u64,
 }
 
 impl Default for SolverOptions {
@@ -84,6 +96,7 @@ impl SolverOptions {
             direct_light: true,
             pair_cache_mb: 1024,
             acceleration_depth: 4,
+            memory_limit_bytes: crate::budget::default_memory_limit(),
         }
     }
 
@@ -152,6 +165,11 @@ impl SolverOptions {
                 "--epsilon {} must be >= 0",
                 self.epsilon
             )));
+        }
+        if self.memory_limit_bytes == 0 {
+            return Err(Error::Parameter(
+                "--memory-limit must be at least 1 byte".into(),
+            ));
         }
         if self.split_depth > 8 {
             return Err(Error::Parameter(format!(

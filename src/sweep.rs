@@ -125,6 +125,16 @@ pub struct SweepArgs {
     /// Antiradiance from both sides of every surface, in every run.
     #[arg(long, help_heading = "Sweep options")]
     pub two_sided_antiradiance: bool,
+    /// Memory limit of every run (bytes, or with a suffix K, M, G, T: 512M, 4G); a run whose
+    /// model would not fit is coarsened, with a warning. Default: half the physical memory.
+    #[arg(
+        long,
+        value_name = "SIZE",
+        value_parser = driver::parse_memory_limit,
+        allow_hyphen_values = true,
+        help_heading = "Sweep options"
+    )]
+    pub memory_limit: Option<u64>,
     /// Per-triangle reference radiance: a CSV written by `antiradiance reference ...
     /// --triangles REF.csv` on the same scene with the same scene options.
     #[arg(long, value_name = "REF.csv", help_heading = "Reference")]
@@ -313,6 +323,9 @@ impl SweepArgs {
                                 options.two_sided = self.two_sided_antiradiance;
                                 if let Some(depth) = self.split_depth {
                                     options.split_depth = depth;
+                                }
+                                if let Some(limit) = self.memory_limit {
+                                    options.memory_limit_bytes = limit;
                                 }
                                 options.validate()?;
                                 let run = RunSpec { preset, options };
@@ -542,6 +555,12 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
             let (solution, seconds, delta) = driver::measured(&mut overall_peak, || {
                 driver::run_solver(args.solver, &loaded.patches, &spec.options, args.quiet)
             });
+            let solution = solution?;
+            if round == 0 {
+                if let Some(w) = driver::memory_warning(solution.stats.memory.as_ref()) {
+                    eprintln!("warning: run {}/{}: {w}", i + 1, runs.len());
+                }
+            }
             let cpu_seconds = cpu_seconds_between(cpu_before, process_cpu_ticks());
             if round > 0 {
                 let r = &mut results[i];

@@ -26,10 +26,10 @@ fn furnace_dense_and_hierarchical() {
             ..SolverOptions::default()
         };
         for (name, solution) in [
-            ("dense", solve_dense(&patches, &options, &hidden())),
+            ("dense", solve_dense(&patches, &options, &hidden()).unwrap()),
             (
                 "hierarchical",
-                solve_hierarchical(&patches, &options, &hidden()),
+                solve_hierarchical(&patches, &options, &hidden()).unwrap(),
             ),
         ] {
             assert!(solution.stats.converged, "{name}");
@@ -57,7 +57,7 @@ fn occluder_shadow_comes_from_antiradiance() {
         },
         &hidden(),
     );
-    let with = solve_dense(&patches, &SolverOptions::default(), &hidden());
+    let with = solve_dense(&patches, &SolverOptions::default(), &hidden()).unwrap();
     let without = solve_dense(
         &patches,
         &SolverOptions {
@@ -65,8 +65,9 @@ fn occluder_shadow_comes_from_antiradiance() {
             ..SolverOptions::default()
         },
         &hidden(),
-    );
-    let hier = solve_hierarchical(&patches, &SolverOptions::default(), &hidden());
+    )
+    .unwrap();
+    let hier = solve_hierarchical(&patches, &SolverOptions::default(), &hidden()).unwrap();
     let (e_with, e_without, e_hier) = (
         error(&scene, &with, &truth),
         error(&scene, &without, &truth),
@@ -98,7 +99,7 @@ fn cornell_box_colour_bleeding_matches_reference() {
         },
         &hidden(),
     );
-    let hier = solve_hierarchical(&patches, &SolverOptions::default(), &hidden());
+    let hier = solve_hierarchical(&patches, &SolverOptions::default(), &hidden()).unwrap();
     let err = error(&scene, &hier, &truth);
     eprintln!("cornell: hierarchical vs reference {err:.4}");
     assert!(err < 0.1, "{err}");
@@ -123,7 +124,7 @@ fn cornell_box_colour_bleeding_matches_reference() {
 fn scaling_and_translation_change_nothing() {
     let base = scenes::occluder_scene();
     let options = SolverOptions::default();
-    let reference = solve_hierarchical(&build_patches(&base, None), &options, &hidden());
+    let reference = solve_hierarchical(&build_patches(&base, None), &options, &hidden()).unwrap();
     for (scale, offset) in [
         (1e-3, DVec3::ZERO),
         (1e3, DVec3::ZERO),
@@ -135,15 +136,15 @@ fn scaling_and_translation_change_nothing() {
         for (name, solution) in [
             (
                 "hierarchical",
-                solve_hierarchical(&build_patches(&scene, None), &options, &hidden()),
+                solve_hierarchical(&build_patches(&scene, None), &options, &hidden()).unwrap(),
             ),
             (
                 "dense",
-                solve_dense(&build_patches(&scene, None), &options, &hidden()),
+                solve_dense(&build_patches(&scene, None), &options, &hidden()).unwrap(),
             ),
         ] {
             let dense_base = if name == "dense" {
-                solve_dense(&build_patches(&base, None), &options, &hidden())
+                solve_dense(&build_patches(&base, None), &options, &hidden()).unwrap()
             } else {
                 reference.clone()
             };
@@ -158,7 +159,7 @@ fn emission_extremes_stay_finite() {
     for emission in [1e-30, 1e30] {
         let scene = scenes::furnace_box(emission, 0.5);
         let patches = build_patches(&scene, None);
-        let solution = solve_hierarchical(&patches, &SolverOptions::default(), &hidden());
+        let solution = solve_hierarchical(&patches, &SolverOptions::default(), &hidden()).unwrap();
         for b in &solution.triangle_radiance {
             for &x in b {
                 assert!(
@@ -189,7 +190,7 @@ fn back_lit_plate_casts_a_shadow() {
         },
         &hidden(),
     );
-    let auto = solve_hierarchical(&patches, &SolverOptions::default(), &hidden());
+    let auto = solve_hierarchical(&patches, &SolverOptions::default(), &hidden()).unwrap();
     let front_only = solve_hierarchical(
         &patches,
         &SolverOptions {
@@ -197,8 +198,9 @@ fn back_lit_plate_casts_a_shadow() {
             ..SolverOptions::default()
         },
         &hidden(),
-    );
-    let dense = solve_dense(&patches, &SolverOptions::default(), &hidden());
+    )
+    .unwrap();
+    let dense = solve_dense(&patches, &SolverOptions::default(), &hidden()).unwrap();
     let (e_auto, e_front, e_dense) = (
         error(&scene, &auto, &truth),
         error(&scene, &front_only, &truth),

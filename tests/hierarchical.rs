@@ -37,7 +37,7 @@ fn every_element_pair_is_covered_exactly_once() {
                     two_sided,
                     ..SolverOptions::default()
                 };
-                let prepared = Prepared::new(&patches, &options, true);
+                let prepared = Prepared::new(&patches, &options, true).unwrap();
                 prepared.tree.validate().unwrap();
                 assert!(
                     prepared.element_count() <= 3000,
@@ -63,7 +63,7 @@ fn refinement_does_not_depend_on_the_thread_count() {
             .num_threads(threads)
             .build()
             .unwrap();
-        pool.install(|| Prepared::new(&patches, &options, false))
+        pool.install(|| Prepared::new(&patches, &options, false).unwrap())
     };
     let (one, three) = (refine_with(1), refine_with(3));
     assert!(
@@ -97,8 +97,8 @@ fn refined_to_element_pairs_equals_dense() {
                 clamp_negative: false,
                 ..SolverOptions::default()
             };
-            let dense = solve_dense(&patches, &options, &Progress::hidden());
-            let hier = solve_hierarchical(&patches, &options, &Progress::hidden());
+            let dense = solve_dense(&patches, &options, &Progress::hidden()).unwrap();
+            let hier = solve_hierarchical(&patches, &options, &Progress::hidden()).unwrap();
             assert_eq!(dense.stats.iterations, hier.stats.iterations);
             for (p, (a, b)) in dense
                 .patch_radiance
@@ -128,7 +128,7 @@ fn default_settings_agree_with_dense() {
     ] {
         let patches = build_patches(&scene, max_edge);
         let options = SolverOptions::default();
-        let dense = solve_dense(&patches, &options, &Progress::hidden());
+        let dense = solve_dense(&patches, &options, &Progress::hidden()).unwrap();
         let mut errors = Vec::new();
         for (split_depth, epsilon) in [(0, 0.25), (0, 0.5), (4, 0.25)] {
             let options = SolverOptions {
@@ -136,7 +136,7 @@ fn default_settings_agree_with_dense() {
                 epsilon,
                 ..options.clone()
             };
-            let hier = solve_hierarchical(&patches, &options, &Progress::hidden());
+            let hier = solve_hierarchical(&patches, &options, &Progress::hidden()).unwrap();
             let err = error(&patches, &hier, &dense);
             eprintln!(
                 "{name}: hierarchical (split depth {split_depth}, epsilon {epsilon}) vs dense {err:.4} (patches {})",

@@ -658,6 +658,7 @@ fn solve(scene: &Scene) -> Solution {
         &SolverOptions::default(),
         true,
     )
+    .unwrap()
 }
 
 /// The seed room and the scene options its figures use, or `None` (with a message) when the

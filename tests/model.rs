@@ -13,6 +13,7 @@ use antiradiance::solve::SolverOptions;
 
 fn solve(patches: &Patches, options: &SolverOptions) -> Solution {
     Prepared::new(patches, options, false)
+        .unwrap()
         .solve(patches, &Progress::hidden())
         .0
 }
@@ -41,7 +42,7 @@ fn max_relative_difference(a: &Solution, b: &Solution) -> f64 {
 fn grey_scene_solves_one_channel_with_the_three_channel_result() {
     let patches = build_patches(&scenes::occluder_scene(), None);
     let options = SolverOptions::default();
-    let mut prepared = Prepared::new(&patches, &options, false);
+    let mut prepared = Prepared::new(&patches, &options, false).unwrap();
     let (grey, _) = prepared.solve(&patches, &Progress::hidden());
     assert_eq!(model(&grey).channels, 1);
     // The same emission, one channel off by 1e-9 relative: no longer grey, solved in three.

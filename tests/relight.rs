@@ -47,7 +47,7 @@ fn with_emission(scene: &Scene, emission: &[[f64; 3]]) -> Scene {
 
 /// A from-scratch hierarchical solve of `scene` (new patches, tree, links; cold start).
 fn from_scratch(scene: &Scene, options: &SolverOptions) -> Solution {
-    solve_hierarchical(&build_patches(scene, None), options, &Progress::hidden())
+    solve_hierarchical(&build_patches(scene, None), options, &Progress::hidden()).unwrap()
 }
 
 fn assert_finite(solution: &Solution) {

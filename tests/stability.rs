@@ -140,10 +140,10 @@ fn hidden() -> Progress {
 fn solve_both(scene: &Scene, options: &SolverOptions) -> [(&'static str, Solution); 2] {
     let patches = build_patches(scene, None);
     [
-        ("dense", solve_dense(&patches, options, &hidden())),
+        ("dense", solve_dense(&patches, options, &hidden()).unwrap()),
         (
             "hierarchical",
-            solve_hierarchical(&patches, options, &hidden()),
+            solve_hierarchical(&patches, options, &hidden()).unwrap(),
         ),
     ]
 }

@@ -82,9 +82,12 @@ fn both_direct(patches: &Patches, options: &SolverOptions) -> [(&'static str, So
     [
         (
             "hierarchical",
-            solve_hierarchical_direct(patches, options, &hidden()),
+            solve_hierarchical_direct(patches, options, &hidden()).unwrap(),
         ),
-        ("dense", solve_dense_direct(patches, options, &hidden())),
+        (
+            "dense",
+            solve_dense_direct(patches, options, &hidden()).unwrap(),
+        ),
     ]
 }
 
@@ -374,7 +377,7 @@ fn direct_light_leaves_a_full_umbra_black() {
     };
     let without = mean_b(
         &scene,
-        &solve_hierarchical(&patches, &options, &hidden()),
+        &solve_hierarchical(&patches, &options, &hidden()).unwrap(),
         4..6,
     );
     for (name, solution) in both_direct(&patches, &options) {
@@ -407,18 +410,22 @@ fn direct_light_is_at_least_as_close_to_the_path_tracer_on_the_occluder_scene() 
     };
     let e_hier_off = error(
         &scene,
-        &solve_hierarchical(&patches, &off, &hidden()),
+        &solve_hierarchical(&patches, &off, &hidden()).unwrap(),
         &truth,
     );
-    let e_dense_off = error(&scene, &solve_dense(&patches, &off, &hidden()), &truth);
+    let e_dense_off = error(
+        &scene,
+        &solve_dense(&patches, &off, &hidden()).unwrap(),
+        &truth,
+    );
     let e_hier_on = error(
         &scene,
-        &solve_hierarchical_direct(&patches, &on, &hidden()),
+        &solve_hierarchical_direct(&patches, &on, &hidden()).unwrap(),
         &truth,
     );
     let e_dense_on = error(
         &scene,
-        &solve_dense_direct(&patches, &on, &hidden()),
+        &solve_dense_direct(&patches, &on, &hidden()).unwrap(),
         &truth,
     );
     eprintln!(
