@@ -11,9 +11,9 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use rayon::prelude::*;
 
 use crate::bins::Bins;
-use crate::health::{self, Guard};
 use crate::budget::{self, Budget, MemoryStats};
 use crate::error::Result;
+use crate::health::{self, Guard};
 use crate::mesh::Patches;
 use crate::model;
 use crate::progress::Progress;

@@ -17,11 +17,11 @@ use rayon::prelude::*;
 
 use crate::accelerate::Anderson;
 use crate::bins::Bins;
-use crate::health::{self, Guard};
 use crate::budget::{
     self, Budget, HierarchicalCosts, LinkBudget, MemoryStats, ModelCounts, OverBudget,
 };
 use crate::error::Result;
+use crate::health::{self, Guard};
 use crate::hierarchy::{ClusterTree, NONE};
 use crate::links::{self, ClusterLink, LinkParams, Links};
 use crate::mesh::Patches;

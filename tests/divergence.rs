@@ -197,7 +197,7 @@ fn open_plates(plates: usize) -> Build {
 /// The solvers of the library: (name, solve).
 type Solver = (
     &'static str,
-    fn(&antiradiance::mesh::Patches, &SolverOptions, &Progress) -> Solution,
+    fn(&antiradiance::mesh::Patches, &SolverOptions, &Progress) -> antiradiance::Result<Solution>,
 );
 
 const SOLVERS: [Solver; 4] = [
@@ -224,7 +224,8 @@ fn bound_of(scene: &Scene) -> f64 {
 /// the figures; returns true when the solve failed.
 fn check(what: &str, scene: &Scene, options: &SolverOptions, solver: Solver) -> bool {
     let patches = build_patches(scene, None);
-    let solution = (solver.1)(&patches, options, &Progress::hidden());
+    let solution =
+        (solver.1)(&patches, options, &Progress::hidden()).expect("fits the memory limit");
     let st = &solution.stats;
     let bound = bound_of(scene);
     println!(
@@ -360,8 +361,10 @@ fn back_to_back_twins_of_the_cornell_box() {
     );
     // Front-only: the twins' backs face the outside, which nothing lights.
     let options = SolverOptions::default();
-    let one = solve_hierarchical(&build_patches(&box_, None), &options, &Progress::hidden());
-    let two = solve_hierarchical(&build_patches(&twins, None), &options, &Progress::hidden());
+    let one =
+        solve_hierarchical(&build_patches(&box_, None), &options, &Progress::hidden()).unwrap();
+    let two =
+        solve_hierarchical(&build_patches(&twins, None), &options, &Progress::hidden()).unwrap();
     let front: Vec<[f64; 3]> = (0..box_.len())
         .map(|t| two.triangle_radiance[2 * t])
         .collect();
@@ -464,7 +467,7 @@ fn shipped_scenes_are_healthy() {
         let room = path.ends_with("room_radiosity_small.obj");
         let solvers: &[Solver] = if room { &SOLVERS[2..3] } else { &SOLVERS };
         for &(name, solve) in solvers {
-            let solution = solve(&patches, &SolverOptions::default(), &Progress::hidden());
+            let solution = solve(&patches, &SolverOptions::default(), &Progress::hidden()).unwrap();
             let st = &solution.stats;
             println!(
                 "{} [{name}]: largest B / bound {:.4}, max row sum {:.6}",
@@ -494,7 +497,7 @@ fn shipped_scenes_are_healthy() {
 fn convex_furnace_rows_stay_under_the_tolerance() {
     let scene = scenes::furnace_box(1.0, 0.5);
     let patches = build_patches(&scene, Some(0.1));
-    let solution = solve_dense(&patches, &SolverOptions::default(), &Progress::hidden());
+    let solution = solve_dense(&patches, &SolverOptions::default(), &Progress::hidden()).unwrap();
     let st = &solution.stats;
     println!(
         "furnace split to 0.1 [dense]: max row sum {:.7}",
