@@ -63,13 +63,15 @@ pub const EXPOSED_SHARE: f64 = 0.25;
 /// of one polygon), blinds. Their backs are lit directly, and without blocking there light
 /// leaks through them. The test is geometric, so it needs no consistent topology: from
 /// stratified points on the patch, cosine-distributed rays into its back hemisphere (from
-/// `2 SCENE_EPS` in front of it, so that a coincident back-to-back twin is met by its back);
+/// `2 SCENE_EPS` in front of it); a patch with a back-to-back twin (the same corners in reverse
+/// order) is not exposed: the twin's front covers its back;
 /// the back is exposed when at least [`EXPOSED_SHARE`] of those that meet a surface first meet
 /// the front of another (they see open space that light crosses), not when they meet backs
 /// (the inside of a closed object, or a twin) or all leave the scene (the outside of a room
 /// shell). A box standing open-bottomed on a floor is exposed inside (its inner faces see the
 /// floor's front): a false positive that costs two-sided bins, not light.
 pub fn exposed_backs(patches: &Patches) -> Vec<bool> {
+    let twinned = back_to_back_twins(patches);
     let scene = RayScene::new(patches);
     let active = patches.active_count().max(1);
     let rays = (BACK_RAY_BUDGET / active).clamp(BACK_RAYS_MIN, BACK_RAYS_MAX);
@@ -77,7 +79,7 @@ pub fn exposed_backs(patches: &Patches) -> Vec<bool> {
     (0..patches.len())
         .into_par_iter()
         .map(|p| {
-            if !patches.active[p] {
+            if !patches.active[p] || twinned[p] {
                 return false;
             }
             let (tri, n) = (&patches.corners[p], patches.normal[p]);
@@ -98,6 +100,37 @@ pub fn exposed_backs(patches: &Patches) -> Vec<bool> {
                 }
             }
             fronts > 0 && fronts as f64 >= EXPOSED_SHARE * hits as f64
+        })
+        .collect()
+}
+
+/// Per patch: another active patch has its corners in the reverse order (on a grid of
+/// [`crate::geometry::SCENE_EPS`]), a back-to-back twin that covers its back. Such pairs are a
+/// two-sided surface given as two one-sided ones: each one's back is the other's front.
+fn back_to_back_twins(patches: &Patches) -> Vec<bool> {
+    let key = |tri: [DVec3; 3]| {
+        let q = |v: DVec3| {
+            (v / crate::geometry::SCENE_EPS)
+                .round()
+                .to_array()
+                .map(|x| x as i64)
+        };
+        // Rotated so the smallest corner comes first: the same cycle gives the same key.
+        let c = tri.map(q);
+        let k = (0..3).min_by_key(|&i| c[i]).unwrap_or(0);
+        [c[k], c[(k + 1) % 3], c[(k + 2) % 3]]
+    };
+    let mut seen: std::collections::HashMap<[[i64; 3]; 3], usize> =
+        std::collections::HashMap::new();
+    for p in 0..patches.len() {
+        if patches.active[p] {
+            seen.insert(key(patches.corners[p]), p);
+        }
+    }
+    (0..patches.len())
+        .map(|p| {
+            let [a, b, c] = patches.corners[p];
+            patches.active[p] && seen.contains_key(&key([a, c, b]))
         })
         .collect()
 }

@@ -239,3 +239,23 @@ fn closed_objects_have_no_exposed_backs() {
         "{exposed:?}"
     );
 }
+
+/// Back-to-back twins (each triangle of a closed room plus its reversed copy) cover each
+/// other's backs: none is exposed, so none blocks at its back.
+#[test]
+fn back_to_back_twins_are_not_exposed() {
+    let mut scene = scenes::furnace_box(1.0, 0.5);
+    let n = scene.triangles.len();
+    for t in 0..n {
+        let [a, b, c] = scene.triangles[t];
+        scene.triangles.push([a, c, b]);
+        let (albedo, emission) = (scene.albedo[t], scene.emission[t]);
+        scene.albedo.push(albedo);
+        scene.emission.push(emission);
+        let m = scene.material[t];
+        scene.material.push(m);
+    }
+    let patches = build_patches(&scene, None);
+    let exposed = antiradiance::model::exposed_backs(&patches);
+    assert_eq!(exposed.iter().filter(|&&b| b).count(), 0, "{exposed:?}");
+}
