@@ -211,7 +211,7 @@ pub fn solve_dense(patches: &Patches, options: &SolverOptions, progress: &Progre
         radiance,
         stats,
         options.clamp_negative,
-        options.antiradiance,
+        options.antiradiance.then_some(bound),
     )
 }
 

@@ -379,13 +379,10 @@ impl Prepared {
             .map(|(s, &a)| a * s.iter().map(|x| x.abs()).sum::<f64>())
             .sum::<f64>()
             / (1.0 - rho_max.clamp(0.0, 0.9999));
-        let mut guard = Guard::new(
-            options
-                .antiradiance
-                .then(|| health::radiance_bound(source_max, rho_max)),
-            reference_mass,
-            patches.emission_scale,
-        );
+        let bound = options
+            .antiradiance
+            .then(|| health::radiance_bound(source_max, rho_max));
+        let mut guard = Guard::new(bound, reference_mass, patches.emission_scale);
         // Anderson acceleration when its history fits its budget; its residuals shrink faster
         // than the plain sweep's contraction, so the remaining error is estimated with the
         // largest albedo as the contraction bound instead.
@@ -598,12 +595,14 @@ impl Prepared {
             exact_links: self.links.exact_sender.len() as u64,
             refinement: self.links.stats.clone(),
         });
+        // The result is checked against the bound of this solve's source (with exact direct
+        // light, the reflected direct light: a tighter bound than the emission's).
         let solution = finish(
             patches,
             patch_radiance,
             stats,
             options.clamp_negative,
-            options.antiradiance,
+            bound,
         );
         let state = ElementState {
             radiance: radiance_rgb,
