@@ -276,7 +276,7 @@ pub fn solve_dense(
         radiance,
         stats,
         options.clamp_negative,
-        options.antiradiance,
+        options.antiradiance.then_some(bound),
     ))
 }
 

@@ -45,13 +45,14 @@ use crate::budget::{self, Budget};
 use crate::dense;
 use crate::error::Result;
 use crate::geometry::{self, plane_tol, PLANE_EPS};
+use crate::health::FailureKind;
 use crate::hierarchical::{Element, Prepared};
 use crate::mesh::Patches;
 use crate::progress::Progress;
 use crate::raytrace::RayScene;
 use crate::sampling::{point_on_triangle, Rng};
 use crate::solution::{Solution, SolveStats};
-use crate::solve::{finish, SolverOptions};
+use crate::solve::{emission_bound, finish, SolverOptions};
 use crate::transport::{separation, PatchGeom, FAR_RATIO};
 
 /// Total shadow rays one direct-light pass aims at, spread over the receivers as
@@ -1092,9 +1093,9 @@ pub fn solve_hierarchical_direct(
     Ok(finish(
         patches,
         radiance,
-        sweep_checks_only(reflected.stats),
+        without_negative_check(reflected.stats),
         options.clamp_negative,
-        options.antiradiance,
+        emission_bound(patches, options.antiradiance),
     ))
 }
 
@@ -1154,17 +1155,22 @@ pub fn solve_dense_direct(
     Ok(finish(
         patches,
         radiance,
-        sweep_checks_only(reflected.stats),
+        without_negative_check(reflected.stats),
         options.clamp_negative,
-        options.antiradiance,
+        emission_bound(patches, options.antiradiance),
     ))
 }
 
-/// The statistics of the indirect solve without the checks of its result (bound, negative
-/// mass): those are made again on `B = E + R`, which is what the solve returns. A failure found
-/// during the sweeps stays.
-fn sweep_checks_only(mut stats: SolveStats) -> SolveStats {
-    if stats.failure.as_ref().is_some_and(|f| f.in_result) {
+/// The statistics of the indirect solve without its negative-mass check, which is made again on
+/// `B = E + R`, what the solve returns (R's negative mass against R's positive mass alone would
+/// overstate it). Every other failure stays: in particular R beyond its own bound
+/// `D_max / (1 - rho_max)`, far tighter than the emission's.
+fn without_negative_check(mut stats: SolveStats) -> SolveStats {
+    if stats
+        .failure
+        .as_ref()
+        .is_some_and(|f| f.kind == FailureKind::NegativeMass)
+    {
         stats.failure = None;
     }
     stats

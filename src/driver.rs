@@ -611,8 +611,9 @@ pub fn run_solver(
 
 /// The warnings of one antiradiance solve: memory limit ([`memory_warning`]), iteration cap
 /// ([`cap_warning`]), skipped direct light ([`direct_light_warning`]), capped form-factor rows
-/// ([`capped_rows_warning`]) and much negative radiance ([`negative_warning`]). A failed solve
-/// is not warned about here: it is an error ([`SolveStats::check`]).
+/// ([`capped_rows_warning`]), much negative radiance ([`negative_warning`]) and radiance above
+/// the bound ([`bound_warning`]). A failed solve is not warned about here: it is an error
+/// ([`SolveStats::check`]).
 pub fn solve_warnings(
     kind: SolverKind,
     stats: &SolveStats,
@@ -625,7 +626,21 @@ pub fn solve_warnings(
         .chain(direct_light_warning(stats, options))
         .chain(capped_rows_warning(kind.name(), stats))
         .chain(negative_warning(kind.name(), stats, options))
+        .chain(bound_warning(kind.name(), stats))
         .collect()
+}
+
+/// The warning for a solve whose largest B is above 1 + [`crate::health::BOUND_WARNING`] times
+/// the bound `E_max / (1 - rho_max)` (but not above 1 + [`crate::health::BOUND_SLACK`], which
+/// fails the solve); `None` otherwise.
+pub fn bound_warning(solver: &str, stats: &SolveStats) -> Option<String> {
+    let ratio = stats.largest_b_over_bound;
+    (stats.failure.is_none() && ratio > 1.0 + crate::health::BOUND_WARNING).then(|| {
+        format!(
+            "the {solver} solver's largest radiance is {ratio:.3} times the bound E_max/(1 - rho_max) = {:.6} the emission and albedos allow: some patches are brighter than the light can make them (cluster links or antiradiance bins too coarse; a smaller --epsilon or more --bins usually lowers it)",
+            stats.radiance_bound
+        )
+    })
 }
 
 /// The warning for a solve that scaled form-factor rows down to 1 (a convex enclosure whose

@@ -571,13 +571,10 @@ impl Prepared {
             .map(|(s, &a)| a * s.iter().map(|x| x.abs()).sum::<f64>())
             .sum::<f64>()
             / (1.0 - rho_max.clamp(0.0, 0.9999));
-        let mut guard = Guard::new(
-            options
-                .antiradiance
-                .then(|| health::radiance_bound(source_max, rho_max)),
-            reference_mass,
-            patches.emission_scale,
-        );
+        let bound = options
+            .antiradiance
+            .then(|| health::radiance_bound(source_max, rho_max));
+        let mut guard = Guard::new(bound, reference_mass, patches.emission_scale);
         // Anderson acceleration when its history (and the flat copies of the state it mixes)
         // fits its own budget and what the model leaves of the memory limit; its residuals
         // shrink faster than the plain sweep's contraction, so the remaining error is estimated
@@ -804,12 +801,14 @@ impl Prepared {
         stats.elements = n;
         memory.peak_bytes = crate::memory::peak_rss_bytes();
         stats.memory = Some(memory);
+        // The result is checked against the bound of this solve's source (with exact direct
+        // light, the reflected direct light: a tighter bound than the emission's).
         let solution = finish(
             patches,
             patch_radiance,
             stats,
             options.clamp_negative,
-            options.antiradiance,
+            bound,
         );
         let state = ElementState {
             radiance: radiance_rgb,

@@ -515,7 +515,7 @@ impl Relighter {
             normalized,
             stats,
             self.prepared.options.clamp_negative,
-            self.prepared.options.antiradiance,
+            crate::solve::emission_bound(&self.patches, self.prepared.options.antiradiance),
         );
         Ok(Relit {
             solution,

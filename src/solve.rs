@@ -310,6 +310,14 @@ pub fn change_ratio(num: f64, den: f64) -> f64 {
     }
 }
 
+/// The bound [`health::radiance_bound`] of the patches' own emission and albedos (normalized
+/// units), for the [`finish`] of a solve of that emission with antiradiance (`antiradiance`
+/// true; `None` otherwise: unoccluded radiosity has no such bound).
+pub fn emission_bound(patches: &Patches, antiradiance: bool) -> Option<f64> {
+    let (e_max, rho_max) = source_and_albedo_max(patches);
+    antiradiance.then(|| health::radiance_bound(e_max, rho_max))
+}
+
 /// The largest source radiance (any channel, absolute) and the largest albedo over the active
 /// patches, the two figures of the bound [`health::radiance_bound`].
 pub fn source_and_albedo_max(patches: &Patches) -> (f64, f64) {
@@ -329,20 +337,20 @@ pub fn source_and_albedo_max(patches: &Patches) -> (f64, f64) {
 /// scene's units.
 ///
 /// The checks ([`crate::health`]): a NaN or infinity among the active patches, a largest |B|
-/// above 1 + [`health::BOUND_SLACK`] times `E_max / (1 - rho_max)` (the patches' own emission
-/// and albedos; only when `check_bound`: the bound does not hold for unoccluded radiosity) and
-/// negative mass above [`health::NEGATIVE_LIMIT`] of the positive each set
-/// `stats.failure` (unless a failure is already there) and so `converged = false`. The
-/// figures (`largest_b_over_bound`, `radiance_bound`, `negative_fraction`) are set either way.
+/// above 1 + [`health::BOUND_SLACK`] times `bound` (in the patches' normalized units: the
+/// bound [`health::radiance_bound`] of the solve's source; `None` where none holds, as for
+/// unoccluded radiosity) and negative mass above [`health::NEGATIVE_LIMIT`] of the positive
+/// each set `stats.failure` (unless a failure is already there) and so `converged = false`.
+/// The figures (`largest_b_over_bound`, `radiance_bound`, `negative_fraction`) are set either
+/// way.
 pub fn finish(
     patches: &Patches,
     mut radiance: Vec<[f64; 3]>,
     mut stats: SolveStats,
     clamp_negative: bool,
-    check_bound: bool,
+    bound: Option<f64>,
 ) -> Solution {
-    let (e_max, rho_max) = source_and_albedo_max(patches);
-    let bound = health::radiance_bound(e_max, rho_max);
+    let bound = bound.unwrap_or(0.0);
     let mut largest = 0.0f64;
     let mut finite = true;
     for (p, b) in radiance.iter().enumerate() {
@@ -381,7 +389,7 @@ pub fn finish(
         0.0
     };
     stats.negative_patches = negative_patches;
-    let checked = check_bound && bound > 0.0 && bound.is_finite();
+    let checked = bound > 0.0 && bound.is_finite();
     let ratio = if checked { largest / bound } else { 0.0 };
     stats.largest_b_over_bound = ratio;
     stats.radiance_bound = if checked {
@@ -389,7 +397,8 @@ pub fn finish(
     } else {
         0.0
     };
-    if stats.failure.is_none() {
+    let new_failure = stats.failure.is_none();
+    if new_failure {
         let kind = if !finite {
             Some(FailureKind::NonFinite)
         } else if ratio > 1.0 + health::BOUND_SLACK {
@@ -413,7 +422,9 @@ pub fn finish(
         });
     }
     if let Some(f) = stats.failure.as_mut() {
-        if f.in_result {
+        // A failure found here is against this call's bound; one found before (during the
+        // sweeps, or by the inner solve of exact direct light) keeps the bound it was found with.
+        if new_failure {
             f.bound = stats.radiance_bound;
         }
         f.max_row_sum = stats.max_row_sum;
