@@ -196,6 +196,10 @@ pub fn solve_dense(
         stats.iterations = iteration;
         progress.inc(1);
         progress.message(format!("residual {change:.2e}"));
+        if !change.is_finite() {
+            stats.diverged = true;
+            break;
+        }
         if convergence.sweep_done(iteration, change, options.tol) {
             stats.converged = true;
             break;

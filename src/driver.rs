@@ -604,8 +604,9 @@ pub fn run_solver(
     Ok(solution)
 }
 
-/// The warnings of one antiradiance solve: memory limit ([`memory_warning`]), iteration cap
-/// ([`cap_warning`]) and skipped direct light ([`direct_light_warning`]).
+/// The warnings of one antiradiance solve: memory limit ([`memory_warning`]), divergence
+/// ([`divergence_warning`]), iteration cap ([`cap_warning`]) and skipped direct light
+/// ([`direct_light_warning`]).
 pub fn solve_warnings(
     kind: SolverKind,
     stats: &SolveStats,
@@ -614,6 +615,7 @@ pub fn solve_warnings(
 ) -> Vec<String> {
     memory_warning(stats.memory.as_ref())
         .into_iter()
+        .chain(divergence_warning(kind.name(), stats))
         .chain(cap_warning(kind.name(), stats, options, patches))
         .chain(direct_light_warning(stats, options))
         .collect()
@@ -652,7 +654,21 @@ pub fn direct_light_warning(stats: &SolveStats, options: &SolverOptions) -> Opti
     })
 }
 
-/// The warning for a solve that stopped at the iteration cap (`None` when it converged): the
+/// The warning for a solve whose iteration diverged (`None` otherwise): the sweep at which the
+/// radiance overflowed and the largest form-factor row sum of the model (above 1, transport
+/// that creates energy, makes the iteration diverge).
+pub fn divergence_warning(solver: &str, stats: &SolveStats) -> Option<String> {
+    stats.diverged.then(|| {
+        format!(
+            "the {solver} solver diverged: the radiance overflowed at sweep {} (the largest form-factor row sum is {:.3}); the result is not a solution: try a finer model (smaller --epsilon, more --bins; a larger --memory-limit when it was coarsened to fit)",
+            stats.iterations,
+            solution::sanitize(stats.max_row_sum)
+        )
+    })
+}
+
+/// The warning for a solve that stopped at the iteration cap (`None` when it converged or
+/// diverged): the
 /// solver, the iterations, the last residual against the tolerance and, since the residual
 /// underestimates the remaining error when the iteration contracts slowly, an estimate of that
 /// error and of the iterations still needed, taking the contraction per sweep to be the highest
@@ -663,7 +679,7 @@ pub fn cap_warning(
     options: &SolverOptions,
     patches: &Patches,
 ) -> Option<String> {
-    if stats.converged {
+    if stats.converged || stats.diverged {
         return None;
     }
     let rho = (0..patches.len())
@@ -1193,6 +1209,11 @@ pub fn solve_summary(
             plural(stats.iterations, "iteration", "iterations"),
             stats.residual
         )
+    } else if stats.diverged {
+        format!(
+            "diverged: the radiance overflowed at sweep {}",
+            stats.iterations
+        )
     } else {
         format!(
             "stopped at the iteration cap ({}) with residual {:.2e} (tolerance {:.1e})",
@@ -1279,6 +1300,8 @@ fn compare_table(
             s.links,
             if s.converged {
                 s.iterations.to_string()
+            } else if s.diverged {
+                format!("{} (diverged)", s.iterations)
             } else {
                 format!("{} (cap)", s.iterations)
             },

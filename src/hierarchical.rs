@@ -27,7 +27,7 @@ use crate::mesh::Patches;
 use crate::model::{self, ModelStats};
 use crate::progress::Progress;
 use crate::solution::{Solution, SolveStats};
-use crate::solve::{finish, Convergence, SolverOptions};
+use crate::solve::{change_ratio, finish, Convergence, SolverOptions};
 use crate::transport::gather_entries;
 
 /// Time spent in each stage of a hierarchical solve, seconds.
@@ -693,16 +693,16 @@ impl Prepared {
             if iteration == 1 {
                 stats.max_row_sum = sums.max_row;
             }
-            let change = if sums.den > 0.0 {
-                sums.num / sums.den
-            } else {
-                0.0
-            };
+            let change = change_ratio(sums.num, sums.den);
             std::mem::swap(&mut radiance, &mut next_radiance);
             std::mem::swap(&mut anti, &mut next_anti);
             stats.iterations = iteration;
             progress.inc(1);
             progress.message(format!("residual {change:.2e}"));
+            if !change.is_finite() {
+                stats.diverged = true;
+                break;
+            }
             if convergence.sweep_done(iteration, change, options.tol) {
                 stats.converged = true;
                 break;
@@ -1536,6 +1536,34 @@ mod tests {
                     );
                 }
             }
+        }
+    }
+
+    /// Transport that creates energy (albedos far above 1, which no scene file can give) makes
+    /// the iteration diverge: both solvers stop at the sweep whose radiance overflows and say
+    /// so, instead of taking the overflow's zero change for convergence.
+    #[test]
+    fn an_overflowing_iteration_is_reported_as_diverged() {
+        let mut patches = build_patches(&scenes::cornell_box(), None);
+        for a in &mut patches.albedo {
+            *a = a.map(|x| 100.0 * x.max(0.5));
+        }
+        let options = SolverOptions {
+            direct_light: false,
+            ..SolverOptions::default()
+        };
+        let hidden = Progress::hidden();
+        for solution in [
+            solve_hierarchical(&patches, &options, &hidden).unwrap(),
+            crate::dense::solve_dense(&patches, &options, &hidden).unwrap(),
+        ] {
+            let stats = &solution.stats;
+            assert!(stats.diverged && !stats.converged, "{stats:?}");
+            assert!(stats.iterations < options.max_iterations, "{stats:?}");
+            assert!(solution
+                .patch_radiance
+                .iter()
+                .all(|b| b.iter().all(|x| x.is_finite())));
         }
     }
 

@@ -13,6 +13,9 @@ pub struct SolveStats {
     pub residual: f64,
     /// True when the residual went under the tolerance before the iteration cap.
     pub converged: bool,
+    /// True when the iteration diverged: a sweep's radiance overflowed (was not finite), and
+    /// the solve stopped there (`converged` is false; the result is not a solution).
+    pub diverged: bool,
     /// Area-weighted mass of negative radiance before clamping, relative to the positive mass:
     /// sum a_p max(0, -B_p,c) / sum a_p max(0, B_p,c), both sums over patches p and RGB
     /// channels c (one ratio, not a mean of per-channel ratios).

@@ -269,7 +269,20 @@ impl Convergence {
 /// Fewest sweeps before convergence may be declared.
 pub const MIN_SWEEPS: usize = 3;
 
-/// Area-weighted relative L1 change between two radiance vectors.
+/// The relative change `num / den` of a sweep (0 when nothing is lit), or infinity when either
+/// sum is not finite: the sweep's radiance overflowed, the iteration diverged (an infinite
+/// denominator would otherwise give a change of 0 and look converged).
+pub fn change_ratio(num: f64, den: f64) -> f64 {
+    if !(num.is_finite() && den.is_finite()) {
+        f64::INFINITY
+    } else if den > 0.0 {
+        num / den
+    } else {
+        0.0
+    }
+}
+
+/// Area-weighted relative L1 change between two radiance vectors ([`change_ratio`]).
 pub fn relative_change(patches: &Patches, old: &[[f64; 3]], new: &[[f64; 3]]) -> f64 {
     let mut num = 0.0;
     let mut den = 0.0;
@@ -280,11 +293,7 @@ pub fn relative_change(patches: &Patches, old: &[[f64; 3]], new: &[[f64; 3]]) ->
             den += a * new[p][c].abs();
         }
     }
-    if den > 0.0 {
-        num / den
-    } else {
-        0.0
-    }
+    change_ratio(num, den)
 }
 
 /// Turns normalized per-patch radiance into a [`Solution`]: measures and optionally clamps
