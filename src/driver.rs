@@ -711,7 +711,8 @@ pub fn direct_light_warning(stats: &SolveStats, options: &SolverOptions) -> Opti
     })
 }
 
-/// The warning for a solve that stopped at the iteration cap (`None` when it converged): the
+/// The warning for a solve that stopped at the iteration cap (`None` when it converged or
+/// diverged): the
 /// solver, the iterations, the last residual against the tolerance and, since the residual
 /// underestimates the remaining error when the iteration contracts slowly, an estimate of that
 /// error and of the iterations still needed, taking the contraction per sweep to be the highest
@@ -1354,6 +1355,8 @@ fn compare_table(
             s.links,
             if s.converged {
                 s.iterations.to_string()
+            } else if s.failure.is_some() {
+                format!("{} (failed)", s.iterations)
             } else {
                 format!("{} (cap)", s.iterations)
             },

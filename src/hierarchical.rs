@@ -1633,6 +1633,34 @@ mod tests {
         }
     }
 
+    /// Transport that creates energy (albedos far above 1, which no scene file can give) makes
+    /// the iteration diverge: both solvers stop at the sweep whose radiance overflows and say
+    /// so, instead of taking the overflow's zero change for convergence.
+    #[test]
+    fn an_overflowing_iteration_is_reported_as_diverged() {
+        let mut patches = build_patches(&scenes::cornell_box(), None);
+        for a in &mut patches.albedo {
+            *a = a.map(|x| 100.0 * x.max(0.5));
+        }
+        let options = SolverOptions {
+            direct_light: false,
+            ..SolverOptions::default()
+        };
+        let hidden = Progress::hidden();
+        for solution in [
+            solve_hierarchical(&patches, &options, &hidden).unwrap(),
+            crate::dense::solve_dense(&patches, &options, &hidden).unwrap(),
+        ] {
+            let stats = &solution.stats;
+            assert!(stats.failure.is_some() && !stats.converged, "{stats:?}");
+            assert!(stats.iterations < options.max_iterations, "{stats:?}");
+            assert!(solution
+                .patch_radiance
+                .iter()
+                .all(|b| b.iter().all(|x| x.is_finite())));
+        }
+    }
+
     #[test]
     fn live_bin_slots_follow_the_mask() {
         let mut live = LiveBins::empty(2, 130);

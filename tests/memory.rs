@@ -328,3 +328,42 @@ fn the_office_mesh_fits_a_small_limit_or_says_it_does_not() {
         assert!(!csv.exists() && !json.exists(), "no output file");
     }
 }
+
+/// The shape figures of known triangles: an equilateral one (aspect 4/sqrt(3)), half a square
+/// (4), a sliver (2 / sin of its smallest angle, about), and a degenerate one (not counted).
+#[test]
+fn triangle_shapes_are_what_they_should_be() {
+    use antiradiance::scene::Scene;
+    use glam::DVec3;
+    let v = DVec3::new;
+    let h = 3f64.sqrt() / 2.0;
+    let corners = [
+        [v(0.0, 0.0, 0.0), v(1.0, 0.0, 0.0), v(0.5, h, 0.0)],
+        [v(0.0, 0.0, 1.0), v(2.0, 0.0, 1.0), v(0.0, 2.0, 1.0)],
+        [v(0.0, 0.0, 2.0), v(100.0, 0.0, 2.0), v(50.0, 0.5, 2.0)],
+        [v(0.0, 0.0, 3.0), v(1.0, 0.0, 3.0), v(2.0, 0.0, 3.0)],
+    ];
+    let n = corners.len();
+    let scene = Scene::from_triangles(&corners, &vec![[0.5; 3]; n], &vec![[0.0; 3]; n]);
+    let shapes = scene.shapes();
+    assert_eq!(
+        shapes.triangles, 3,
+        "the degenerate triangle is not counted"
+    );
+    let equilateral = 4.0 / 3f64.sqrt();
+    let sliver = 100.0 * 100.0 / 25.0;
+    // Nearest rank over three values: the median is the middle one, p90 and p99 the largest.
+    assert!((shapes.aspect_p50 - 4.0).abs() < 1e-12, "{shapes:?}");
+    assert!((shapes.aspect_p90 - sliver).abs() < 1e-9, "{shapes:?}");
+    assert_eq!(shapes.aspect_p99, shapes.aspect_max);
+    assert!((shapes.aspect_max - sliver).abs() < 1e-9, "{shapes:?}");
+    assert!(equilateral < shapes.aspect_p50);
+    assert!((shapes.area_min - 0.5 * h).abs() < 1e-12, "{shapes:?}");
+    assert!((shapes.area_max - 25.0).abs() < 1e-9, "{shapes:?}");
+    assert!(
+        (shapes.area_range - 25.0 / (0.5 * h)).abs() < 1e-9,
+        "{shapes:?}"
+    );
+    let one = Scene::from_triangles(&corners[..1], &[[0.5; 3]], &[[0.0; 3]]).shapes();
+    assert!((one.aspect_p50 - equilateral).abs() < 1e-12 && one.area_range == 1.0);
+}
