@@ -140,6 +140,11 @@ pub fn signed_extent(node: &Node, n: DVec3, d: f64) -> (f64, f64) {
 /// Bins per axis of the cluster tree's surface-area split.
 const SPLIT_BINS: usize = 16;
 
+/// The bin (0..[`SPLIT_BINS`]) of grid position `g` in a range starting at `lo`, `span` wide.
+fn split_bin(g: i64, lo: i64, span: i64) -> usize {
+    ((g - lo) as i128 * SPLIT_BINS as i128 / span as i128) as usize
+}
+
 /// Splits `range` (at least two patches) in two by the surface area heuristic over
 /// [`SPLIT_BINS`] centroid bins per axis, and returns the size of the first part (the range is
 /// reordered, first part first, each part in its former order).
@@ -177,8 +182,7 @@ fn sah_split(range: &mut [u32], centroid: &[DVec3], corners: &[Tri]) -> usize {
             continue;
         }
         let span = hi - lo + 1;
-        let bin_of =
-            |p: u32| ((grid(p, axis) - lo) as i128 * SPLIT_BINS as i128 / span as i128) as usize;
+        let bin_of = |p: u32| split_bin(grid(p, axis), lo, span);
         let mut count = [0usize; SPLIT_BINS];
         let mut boxes = [empty; SPLIT_BINS];
         for &p in range.iter() {
@@ -208,20 +212,9 @@ fn sah_split(range: &mut [u32], centroid: &[DVec3], corners: &[Tri]) -> usize {
     let Some((_, axis, last, lo, span)) = best else {
         return range.len() / 2;
     };
-    let first: Vec<u32> = range
+    let (first, second): (Vec<u32>, Vec<u32>) = range
         .iter()
-        .copied()
-        .filter(|&p| {
-            ((grid(p, axis) - lo) as i128 * SPLIT_BINS as i128 / span as i128) as usize <= last
-        })
-        .collect();
-    let second: Vec<u32> = range
-        .iter()
-        .copied()
-        .filter(|&p| {
-            ((grid(p, axis) - lo) as i128 * SPLIT_BINS as i128 / span as i128) as usize > last
-        })
-        .collect();
+        .partition(|&&p| split_bin(grid(p, axis), lo, span) <= last);
     range[..first.len()].copy_from_slice(&first);
     range[first.len()..].copy_from_slice(&second);
     first.len()

@@ -168,24 +168,25 @@ pub fn is_convex_enclosure(tree: &ClusterTree) -> bool {
     if tree.elements.is_empty() {
         return false;
     }
-    // Distinct planes (normal, offset), deduplicated on a fine grid.
-    let mut planes: Vec<(DVec3, f64)> = Vec::new();
-    let mut seen = std::collections::HashSet::new();
+    let mut element_planes = Vec::with_capacity(tree.elements.len());
     for &node in &tree.elements {
-        let Some((n, d)) = tree.nodes[node as usize].plane else {
+        let Some(plane) = tree.nodes[node as usize].plane else {
             return false;
         };
-        let key = (
-            (n.x * 1e9).round() as i64,
-            (n.y * 1e9).round() as i64,
-            (n.z * 1e9).round() as i64,
-            (d * 1e9).round() as i64,
-        );
-        if seen.insert(key) {
-            planes.push((n, d));
-        }
+        element_planes.push(plane);
     }
+    let planes = distinct_planes(element_planes);
     planes.par_iter().all(|&(n, d)| all_in_front(tree, n, d))
+}
+
+/// The distinct planes (normal, offset) of `planes`, in first-seen order, deduplicated on a
+/// grid of 1e-9: the planes the convexity tests check.
+fn distinct_planes(planes: impl IntoIterator<Item = (DVec3, f64)>) -> Vec<(DVec3, f64)> {
+    let mut seen = std::collections::HashSet::new();
+    planes
+        .into_iter()
+        .filter(|&(n, d)| seen.insert([n.x, n.y, n.z, d].map(|x| (x * 1e9).round() as i64)))
+        .collect()
 }
 
 /// [`is_convex_enclosure`] over patches rather than a tree (the dense solver's test): true when
@@ -197,21 +198,10 @@ pub fn patches_convex(patches: &crate::mesh::Patches) -> bool {
     if active.is_empty() {
         return false;
     }
-    let mut planes: Vec<(DVec3, f64)> = Vec::new();
-    let mut seen = std::collections::HashSet::new();
-    for &p in &active {
+    let planes = distinct_planes(active.iter().map(|&p| {
         let n = patches.normal[p];
-        let d = n.dot(patches.corners[p][0]);
-        let key = (
-            (n.x * 1e9).round() as i64,
-            (n.y * 1e9).round() as i64,
-            (n.z * 1e9).round() as i64,
-            (d * 1e9).round() as i64,
-        );
-        if seen.insert(key) {
-            planes.push((n, d));
-        }
-    }
+        (n, n.dot(patches.corners[p][0]))
+    }));
     planes.par_iter().all(|&(n, d)| {
         active.iter().all(|&p| {
             patches.corners[p]
