@@ -12,9 +12,9 @@
 use std::path::Path;
 use std::time::Duration;
 
-use antiradiance::relight::{emitter_centroids, sweep_weights, Relighter};
+use antiradiance::scene::generated;
 use antiradiance::scene::{load_obj, Scene, SceneOptions};
-use antiradiance::scenes;
+use antiradiance::solve::relight::{emitter_centroids, sweep_weights, Relighter};
 use antiradiance::solve::SolverOptions;
 use criterion::{criterion_group, criterion_main, Criterion};
 
@@ -44,7 +44,7 @@ fn bench_scene() -> (String, Scene) {
             room.display()
         );
     }
-    let scene = scenes::subdivided_cornell_box(9_264);
+    let scene = generated::subdivided_cornell_box(9_264);
     (format!("cornell{}", scene.len()), scene)
 }
 

@@ -9,17 +9,17 @@
 use std::path::Path;
 use std::time::Duration;
 
-use antiradiance::bins::Bins;
-use antiradiance::budget::LinkBudget;
-use antiradiance::dense::solve_dense;
-use antiradiance::direct::solve_hierarchical_direct;
-use antiradiance::hierarchical::{link_params, Prepared};
+use antiradiance::geometry::bins::Bins;
+use antiradiance::hierarchy::links;
 use antiradiance::hierarchy::ClusterTree;
-use antiradiance::links;
 use antiradiance::mesh::{build_patches, Patches};
 use antiradiance::progress::Progress;
+use antiradiance::scene::generated;
 use antiradiance::scene::{load_obj, SceneOptions};
-use antiradiance::scenes;
+use antiradiance::solve::budget::LinkBudget;
+use antiradiance::solve::dense::solve_dense;
+use antiradiance::solve::direct::solve_hierarchical_direct;
+use antiradiance::solve::hierarchical::{link_params, Prepared};
 use antiradiance::solve::SolverOptions;
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 
@@ -54,7 +54,7 @@ fn bench_scenes() -> Vec<(String, Patches)> {
             out.push((name.to_string(), build_patches(&scene, None)));
         }
     }
-    let cornell = scenes::subdivided_cornell_box(10_000);
+    let cornell = generated::subdivided_cornell_box(10_000);
     out.push(("cornell10k".to_string(), build_patches(&cornell, None)));
     out
 }

@@ -37,13 +37,13 @@ pub enum Error {
     /// A command-line or library parameter is out of its valid range.
     #[error("invalid parameter: {0}")]
     Parameter(String),
-    /// A solve failed its health checks (see [`crate::health`]): it diverged, produced NaN or
+    /// A solve failed its health checks (see [`crate::solve::health`]): it diverged, produced NaN or
     /// infinite values, radiance beyond what the emission and albedos allow, or negative
     /// radiance comparable to the positive. The message names the solver, the check, the sweep
     /// and the figures.
     #[error("{0}")]
     Solve(String),
-    /// A solve does not fit its memory limit, even coarsened (see [`crate::budget`]); raised
+    /// A solve does not fit its memory limit, even coarsened (see [`crate::solve::budget`]); raised
     /// before the large arrays are allocated.
     #[error("{0}")]
     Memory(String),

@@ -1,12 +1,14 @@
 //! `antiradiance`: the command line. It only parses arguments and hands them to
-//! [`antiradiance::driver`]; every failure ends as one line `error: ...` on stderr.
+//! [`cli`]; every failure ends as one line `error: ...` on stderr.
 //!
 //! Exit codes: 0 success, 1 error (bad scene, bad parameter, failed write), 2 bad command line.
 
 use std::process::ExitCode;
 
-use antiradiance::driver;
+mod cli;
+
 use clap::{Parser, Subcommand};
+use cli::driver;
 
 /// Diffuse global illumination on triangle meshes with the antiradiance method.
 #[derive(Parser, Debug)]
@@ -25,28 +27,28 @@ enum Command {
     /// Run the dense and hierarchical solvers on one scene and compare them.
     Compare(driver::CompareArgs),
     /// Animate the lights of a scene: build links once, relight every frame, write PNG frames.
-    Relight(antiradiance::relight::RelightArgs),
+    Relight(cli::relight::RelightArgs),
     /// Measure time and error against the path tracer over a grid of solver knobs.
-    Sweep(antiradiance::sweep::SweepArgs),
+    Sweep(cli::sweep::SweepArgs),
     /// Write a generated scene (OBJ + MTL): the Cornell box, a mesh in a closed room, a mesh
     /// under an area light, a badly triangulated variant of a mesh, a CAD-like classroom or
     /// office.
-    Scene(antiradiance::stage::StageArgs),
+    Scene(cli::scene::StageArgs),
 }
 
 fn main() -> ExitCode {
     install_panic_hook();
-    let cli = match Cli::try_parse() {
-        Ok(cli) => cli,
+    let parsed = match Cli::try_parse() {
+        Ok(parsed) => parsed,
         Err(e) => return usage_error(e),
     };
-    let result = match &cli.command {
+    let result = match &parsed.command {
         Command::Solve(args) => driver::solve(args),
         Command::Reference(args) => driver::reference(args),
         Command::Compare(args) => driver::compare(args),
-        Command::Relight(args) => antiradiance::relight::relight(args),
-        Command::Sweep(args) => antiradiance::sweep::sweep(args),
-        Command::Scene(args) => antiradiance::stage::stage(args),
+        Command::Relight(args) => cli::relight::relight(args),
+        Command::Sweep(args) => cli::sweep::sweep(args),
+        Command::Scene(args) => cli::scene::stage(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

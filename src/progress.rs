@@ -1,8 +1,22 @@
-//! Progress bars on stderr for long stages; silent when stderr is not a terminal or when disabled.
+//! Progress bars on stderr for long stages; silent when stderr is not a terminal, when disabled,
+//! or when the crate is built without its `progress` feature (then nothing is ever drawn).
 
+#[cfg(feature = "progress")]
 use std::io::IsTerminal;
 
+#[cfg(feature = "progress")]
 use indicatif::{ProgressBar, ProgressStyle};
+
+/// Stands in for the bar when the crate is built without progress bars.
+#[cfg(not(feature = "progress"))]
+struct ProgressBar;
+
+#[cfg(not(feature = "progress"))]
+impl ProgressBar {
+    fn inc(&self, _n: u64) {}
+    fn set_message(&self, _msg: String) {}
+    fn finish_and_clear(&self) {}
+}
 
 /// A progress reporter for one stage: a bar on a terminal, nothing otherwise.
 pub struct Progress {
@@ -12,6 +26,14 @@ pub struct Progress {
 impl Progress {
     /// A bar labelled `stage` counting to `total`; hidden when `enabled` is false or stderr is not
     /// a terminal.
+    #[cfg(not(feature = "progress"))]
+    pub fn new(_stage: &str, _total: u64, _enabled: bool) -> Progress {
+        Progress { bar: None }
+    }
+
+    /// A bar labelled `stage` counting to `total`; hidden when `enabled` is false or stderr is not
+    /// a terminal.
+    #[cfg(feature = "progress")]
     pub fn new(stage: &str, total: u64, enabled: bool) -> Progress {
         if !enabled || !std::io::stderr().is_terminal() {
             return Progress { bar: None };

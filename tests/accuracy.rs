@@ -1,13 +1,13 @@
 //! Scenario tests against independent truth: the closed-box furnace, the path tracer on a scene
 //! with a real shadow, colour bleeding, and invariance under scaling and translation.
 
-use antiradiance::dense::solve_dense;
-use antiradiance::driver::error_against as error; // the design note's error, per input triangle
-use antiradiance::hierarchical::solve_hierarchical;
 use antiradiance::mesh::{build_patches, Patches};
 use antiradiance::progress::Progress;
 use antiradiance::reference::{solve_reference, ReferenceOptions};
-use antiradiance::scenes;
+use antiradiance::scene::generated;
+use antiradiance::solve::dense::solve_dense;
+use antiradiance::solve::hierarchical::solve_hierarchical;
+use antiradiance::solve::solution::error_against as error; // the design note's error, per input triangle
 use antiradiance::solve::SolverOptions;
 use glam::DVec3;
 
@@ -18,7 +18,7 @@ fn hidden() -> Progress {
 #[test]
 fn furnace_dense_and_hierarchical() {
     for (emission, albedo) in [(1.0, 0.5), (2.0, 0.8)] {
-        let scene = scenes::furnace_box(emission, albedo);
+        let scene = generated::furnace_box(emission, albedo);
         let patches = build_patches(&scene, Some(0.25));
         let expect = emission / (1.0 - albedo);
         let options = SolverOptions {
@@ -47,7 +47,7 @@ fn furnace_dense_and_hierarchical() {
 
 #[test]
 fn occluder_shadow_comes_from_antiradiance() {
-    let scene = scenes::occluder_scene();
+    let scene = generated::occluder_scene();
     let patches: Patches = build_patches(&scene, None);
     let truth = solve_reference(
         &patches,
@@ -89,7 +89,7 @@ fn occluder_shadow_comes_from_antiradiance() {
 
 #[test]
 fn cornell_box_colour_bleeding_matches_reference() {
-    let scene = scenes::cornell_box();
+    let scene = generated::cornell_box();
     let patches = build_patches(&scene, None);
     let truth = solve_reference(
         &patches,
@@ -108,10 +108,10 @@ fn cornell_box_colour_bleeding_matches_reference() {
         let mut red = [0.0; 3];
         let mut green = [0.0; 3];
         for t in 0..scene.len() {
-            if scene.albedo[t] == scenes::CORNELL_RED {
+            if scene.albedo[t] == generated::CORNELL_RED {
                 (0..3).for_each(|c| red[c] += sol.triangle_radiance[t][c]);
             }
-            if scene.albedo[t] == scenes::CORNELL_GREEN {
+            if scene.albedo[t] == generated::CORNELL_GREEN {
                 (0..3).for_each(|c| green[c] += sol.triangle_radiance[t][c]);
             }
         }
@@ -122,7 +122,7 @@ fn cornell_box_colour_bleeding_matches_reference() {
 
 #[test]
 fn scaling_and_translation_change_nothing() {
-    let base = scenes::occluder_scene();
+    let base = generated::occluder_scene();
     let options = SolverOptions::default();
     let reference = solve_hierarchical(&build_patches(&base, None), &options, &hidden()).unwrap();
     for (scale, offset) in [
@@ -157,7 +157,7 @@ fn scaling_and_translation_change_nothing() {
 #[test]
 fn emission_extremes_stay_finite() {
     for emission in [1e-30, 1e30] {
-        let scene = scenes::furnace_box(emission, 0.5);
+        let scene = generated::furnace_box(emission, 0.5);
         let patches = build_patches(&scene, None);
         let solution = solve_hierarchical(&patches, &SolverOptions::default(), &hidden()).unwrap();
         for b in &solution.triangle_radiance {
@@ -177,7 +177,7 @@ fn emission_extremes_stay_finite() {
 /// tracer's absorbing back does.
 #[test]
 fn back_lit_plate_casts_a_shadow() {
-    let mut scene = scenes::occluder_scene();
+    let mut scene = generated::occluder_scene();
     for t in 2..4 {
         scene.triangles[t].swap(1, 2);
     }
@@ -222,18 +222,21 @@ fn back_lit_plate_casts_a_shadow() {
 #[test]
 fn closed_objects_have_no_exposed_backs() {
     // A closed cube facing outward, standing above the floor of the occluder scene.
-    let mut cube = scenes::furnace_box(0.0, 0.5);
+    let mut cube = generated::furnace_box(0.0, 0.5);
     for t in &mut cube.triangles {
         t.swap(1, 2);
     }
-    for (name, scene) in [("furnace", scenes::furnace_box(1.0, 0.5)), ("cube", cube)] {
+    for (name, scene) in [
+        ("furnace", generated::furnace_box(1.0, 0.5)),
+        ("cube", cube),
+    ] {
         let patches = build_patches(&scene, None);
-        let exposed = antiradiance::model::exposed_backs(&patches);
+        let exposed = antiradiance::solve::hierarchical::model::exposed_backs(&patches);
         assert_eq!(exposed.iter().filter(|&&b| b).count(), 0, "{name}");
     }
     // The occluder's plate is an open sheet: its back (facing the floor) is exposed.
-    let patches = build_patches(&scenes::occluder_scene(), None);
-    let exposed = antiradiance::model::exposed_backs(&patches);
+    let patches = build_patches(&generated::occluder_scene(), None);
+    let exposed = antiradiance::solve::hierarchical::model::exposed_backs(&patches);
     assert!(
         exposed[2] && exposed[3] && !exposed[0] && !exposed[4],
         "{exposed:?}"
@@ -244,7 +247,7 @@ fn closed_objects_have_no_exposed_backs() {
 /// other's backs: none is exposed, so none blocks at its back.
 #[test]
 fn back_to_back_twins_are_not_exposed() {
-    let mut scene = scenes::furnace_box(1.0, 0.5);
+    let mut scene = generated::furnace_box(1.0, 0.5);
     let n = scene.triangles.len();
     for t in 0..n {
         let [a, b, c] = scene.triangles[t];
@@ -256,6 +259,6 @@ fn back_to_back_twins_are_not_exposed() {
         scene.material.push(m);
     }
     let patches = build_patches(&scene, None);
-    let exposed = antiradiance::model::exposed_backs(&patches);
+    let exposed = antiradiance::solve::hierarchical::model::exposed_backs(&patches);
     assert_eq!(exposed.iter().filter(|&&b| b).count(), 0, "{exposed:?}");
 }

@@ -11,16 +11,16 @@
 
 use std::path::{Path, PathBuf};
 
-use antiradiance::dense::solve_dense;
-use antiradiance::direct::{solve_dense_direct, solve_hierarchical_direct};
-use antiradiance::health::{self, FailureKind};
-use antiradiance::hierarchical::solve_hierarchical;
 use antiradiance::mesh::build_patches;
 use antiradiance::progress::Progress;
-use antiradiance::relight::Relighter;
+use antiradiance::scene::generated;
 use antiradiance::scene::{load_obj, Scene, SceneOptions};
-use antiradiance::scenes;
-use antiradiance::solution::Solution;
+use antiradiance::solve::dense::solve_dense;
+use antiradiance::solve::direct::{solve_dense_direct, solve_hierarchical_direct};
+use antiradiance::solve::health::{self, FailureKind};
+use antiradiance::solve::hierarchical::solve_hierarchical;
+use antiradiance::solve::relight::Relighter;
+use antiradiance::solve::solution::Solution;
 use antiradiance::solve::{change_ratio, SolverOptions};
 use antiradiance::Error;
 use glam::DVec3;
@@ -345,7 +345,7 @@ fn two_sided() -> SolverOptions {
 /// convergence) and must say so.
 #[test]
 fn back_to_back_twins_of_the_cornell_box() {
-    let box_ = scenes::cornell_box();
+    let box_ = generated::cornell_box();
     let twins = Build::of(&box_).twinned().scene();
     assert_eq!(twins.len(), 2 * box_.len());
     assert!(
@@ -370,8 +370,12 @@ fn back_to_back_twins_of_the_cornell_box() {
         .collect();
     let areas: Vec<f64> = (0..box_.len()).map(|t| box_.area(t)).collect();
     let emissive: Vec<bool> = (0..box_.len()).map(|t| box_.is_emitter(t)).collect();
-    let e =
-        antiradiance::solution::relative_error(&areas, &emissive, &front, &one.triangle_radiance);
+    let e = antiradiance::solve::solution::relative_error(
+        &areas,
+        &emissive,
+        &front,
+        &one.triangle_radiance,
+    );
     println!(
         "Cornell box twins, front-only: fronts against the one-sided box {:.3}%",
         100.0 * e
@@ -495,7 +499,7 @@ fn shipped_scenes_are_healthy() {
 /// and B = E / (1 - rho) = 2 within 0.1%.
 #[test]
 fn convex_furnace_rows_stay_under_the_tolerance() {
-    let scene = scenes::furnace_box(1.0, 0.5);
+    let scene = generated::furnace_box(1.0, 0.5);
     let patches = build_patches(&scene, Some(0.1));
     let solution = solve_dense(&patches, &SolverOptions::default(), &Progress::hidden()).unwrap();
     let st = &solution.stats;
@@ -555,7 +559,7 @@ fn an_overflowed_change_is_not_zero() {
 fn diverging_solve_on_the_command_line_writes_no_result() {
     let dir = tempfile::tempdir().unwrap();
     let obj = dir.path().join("blinds_twins.obj");
-    scenes::write_obj(
+    generated::write_obj(
         &blinds_room(30).twinned().scene(),
         &obj,
         "blinds doubled back to back",

@@ -1,12 +1,12 @@
 //! Oracle tests: the hierarchical solver against the dense one, and the link structure's coverage.
 
-use antiradiance::dense::solve_dense;
-use antiradiance::hierarchical::{solve_hierarchical, Prepared};
-use antiradiance::links;
+use antiradiance::hierarchy::links;
 use antiradiance::mesh::{build_patches, Patches};
 use antiradiance::progress::Progress;
-use antiradiance::scenes;
-use antiradiance::solution::{relative_error, Solution};
+use antiradiance::scene::generated;
+use antiradiance::solve::dense::solve_dense;
+use antiradiance::solve::hierarchical::{solve_hierarchical, Prepared};
+use antiradiance::solve::solution::{relative_error, Solution};
 use antiradiance::solve::SolverOptions;
 
 fn error(patches: &Patches, estimate: &Solution, truth: &Solution) -> f64 {
@@ -26,8 +26,8 @@ fn error(patches: &Patches, estimate: &Solution, truth: &Solution) -> f64 {
 #[test]
 fn every_element_pair_is_covered_exactly_once() {
     for (name, scene, max_edge) in [
-        ("occluder", scenes::occluder_scene(), None),
-        ("cornell", scenes::cornell_box(), Some(150.0)),
+        ("occluder", generated::occluder_scene(), None),
+        ("cornell", generated::cornell_box(), Some(150.0)),
     ] {
         let patches = build_patches(&scene, max_edge);
         for epsilon in [0.25, 1.0, 4.0] {
@@ -56,7 +56,7 @@ fn every_element_pair_is_covered_exactly_once() {
 /// on demand, so the rounds of leaf splits are exercised too).
 #[test]
 fn refinement_does_not_depend_on_the_thread_count() {
-    let patches = build_patches(&scenes::cornell_box(), None);
+    let patches = build_patches(&generated::cornell_box(), None);
     let options = SolverOptions::default();
     let refine_with = |threads: usize| {
         let pool = rayon::ThreadPoolBuilder::new()
@@ -82,8 +82,8 @@ fn refinement_does_not_depend_on_the_thread_count() {
 #[test]
 fn refined_to_element_pairs_equals_dense() {
     for (name, scene, max_edge) in [
-        ("occluder", scenes::occluder_scene(), None),
-        ("cornell", scenes::cornell_box(), Some(200.0)),
+        ("occluder", generated::occluder_scene(), None),
+        ("cornell", generated::cornell_box(), Some(200.0)),
     ] {
         let patches = build_patches(&scene, max_edge);
         for two_sided in [false, true] {
@@ -123,8 +123,8 @@ fn refined_to_element_pairs_equals_dense() {
 #[test]
 fn default_settings_agree_with_dense() {
     for (name, scene, max_edge) in [
-        ("occluder", scenes::occluder_scene(), None),
-        ("cornell", scenes::cornell_box(), Some(60.0)),
+        ("occluder", generated::occluder_scene(), None),
+        ("cornell", generated::cornell_box(), Some(60.0)),
     ] {
         let patches = build_patches(&scene, max_edge);
         let options = SolverOptions::default();

@@ -4,11 +4,11 @@
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
-use antiradiance::dense::solve_dense;
-use antiradiance::hierarchical::Prepared;
 use antiradiance::mesh::build_patches;
 use antiradiance::progress::Progress;
-use antiradiance::scenes;
+use antiradiance::scene::generated;
+use antiradiance::solve::dense::solve_dense;
+use antiradiance::solve::hierarchical::Prepared;
 use antiradiance::solve::SolverOptions;
 use antiradiance::Error;
 use serde_json::Value;
@@ -271,7 +271,7 @@ fn the_report_has_the_mesh_fields() {
 /// do not fit, and a model that fits as asked reports no coarsening.
 #[test]
 fn the_library_respects_the_limit() {
-    let patches = build_patches(&scenes::cornell_box(), Some(100.0));
+    let patches = build_patches(&generated::cornell_box(), Some(100.0));
     let tiny = SolverOptions {
         memory_limit_bytes: 1 << 20,
         ..SolverOptions::default()

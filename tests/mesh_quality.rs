@@ -1,6 +1,6 @@
 //! Mesh quality: the variant writers (`antiradiance scene variant`,
-//! `antiradiance::variants`), the solver's invariance under re-triangulation, and the generated
-//! CAD-like interiors (`antiradiance scene classroom` / `office`, `antiradiance::interiors`).
+//! `antiradiance::scene::variants`), the solver's invariance under re-triangulation, and the generated
+//! CAD-like interiors (`antiradiance scene classroom` / `office`, `antiradiance::scene::interiors`).
 //!
 //! Every variant is checked on the shipped Cornell box, written to files and read back: the
 //! same area per material, a map that covers every output triangle and gives every input
@@ -15,19 +15,19 @@
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
-use antiradiance::driver::{run_solver, SolverKind};
-use antiradiance::interiors::{
+use antiradiance::mesh::build_patches;
+use antiradiance::scene::generated::{furnace_box, write_obj};
+use antiradiance::scene::interiors::{
     self, classroom, cos_sin_turn, office, CLASSROOM_TRIANGLES, OFFICE_TRIANGLES, REVERSED_SHARE,
 };
-use antiradiance::mesh::build_patches;
-use antiradiance::scene::{load_obj, Scene, SceneOptions};
-use antiradiance::scenes::{furnace_box, write_obj};
-use antiradiance::solution::{relative_error, Solution};
-use antiradiance::solve::SolverOptions;
-use antiradiance::variants::{
+use antiradiance::scene::variants::{
     aspect_ratio, make_variant, map_back, map_path, material_text, read_map, write_variant, MapRow,
     Variant, VariantKind, VariantOptions, MAP_CSV_HEADER,
 };
+use antiradiance::scene::{load_obj, Scene, SceneOptions};
+use antiradiance::solve::solution::{relative_error, Solution};
+use antiradiance::solve::SolverKind;
+use antiradiance::solve::SolverOptions;
 use glam::DVec3;
 
 mod common;
@@ -652,11 +652,11 @@ fn scene_variant_bad_input_is_one_error_line() {
 
 fn solve(scene: &Scene) -> Solution {
     let patches = build_patches(scene, None);
-    run_solver(
+    antiradiance::solve::run(
         SolverKind::Hierarchical,
         &patches,
         &SolverOptions::default(),
-        true,
+        &antiradiance::progress::Progress::hidden(),
     )
     .unwrap()
 }

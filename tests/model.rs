@@ -3,12 +3,12 @@
 //! saving must leave the result unchanged (or, for convex scenes, right against the analytic
 //! furnace value).
 
-use antiradiance::hierarchical::Prepared;
 use antiradiance::mesh::{build_patches, Patches};
-use antiradiance::model::ModelStats;
 use antiradiance::progress::Progress;
-use antiradiance::scenes;
-use antiradiance::solution::Solution;
+use antiradiance::scene::generated;
+use antiradiance::solve::hierarchical::model::ModelStats;
+use antiradiance::solve::hierarchical::Prepared;
+use antiradiance::solve::solution::Solution;
 use antiradiance::solve::SolverOptions;
 
 fn solve(patches: &Patches, options: &SolverOptions) -> Solution {
@@ -40,7 +40,7 @@ fn max_relative_difference(a: &Solution, b: &Solution) -> f64 {
 
 #[test]
 fn grey_scene_solves_one_channel_with_the_three_channel_result() {
-    let patches = build_patches(&scenes::occluder_scene(), None);
+    let patches = build_patches(&generated::occluder_scene(), None);
     let options = SolverOptions::default();
     let mut prepared = Prepared::new(&patches, &options, false).unwrap();
     let (grey, _) = prepared.solve(&patches, &Progress::hidden());
@@ -65,7 +65,7 @@ fn grey_scene_solves_one_channel_with_the_three_channel_result() {
 
 #[test]
 fn coloured_scene_solves_three_channels() {
-    let patches = build_patches(&scenes::cornell_box(), None);
+    let patches = build_patches(&generated::cornell_box(), None);
     let solution = solve(&patches, &SolverOptions::default());
     let m = model(&solution);
     assert_eq!(m.channels, 3);
@@ -76,7 +76,7 @@ fn coloured_scene_solves_three_channels() {
 fn convex_enclosure_is_solved_as_plain_radiosity() {
     let (emission, albedo) = (1.0, 0.6);
     for k in [1, 4] {
-        let scene = scenes::subdivide(&scenes::furnace_box(emission, albedo), k);
+        let scene = generated::subdivide(&generated::furnace_box(emission, albedo), k);
         let patches = build_patches(&scene, None);
         let solution = solve(&patches, &SolverOptions::default());
         let m = model(&solution);
@@ -103,8 +103,8 @@ fn convex_enclosure_is_solved_as_plain_radiosity() {
 #[test]
 fn occluded_scenes_keep_antiradiance() {
     for (name, scene) in [
-        ("occluder", scenes::occluder_scene()),
-        ("cornell", scenes::cornell_box()),
+        ("occluder", generated::occluder_scene()),
+        ("cornell", generated::cornell_box()),
     ] {
         let patches = build_patches(&scene, None);
         let m = model(&solve(&patches, &SolverOptions::default()));
@@ -124,7 +124,7 @@ fn occluded_scenes_keep_antiradiance() {
 
 #[test]
 fn pair_cache_does_not_change_the_result() {
-    let patches = build_patches(&scenes::cornell_box(), Some(120.0));
+    let patches = build_patches(&generated::cornell_box(), Some(120.0));
     let cached = solve(&patches, &SolverOptions::default());
     let uncached = solve(
         &patches,

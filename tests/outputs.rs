@@ -4,15 +4,15 @@ use std::io::BufRead;
 use std::path::Path;
 
 use antiradiance::mesh::{build_patches, Patches};
-use antiradiance::output::{
-    read_triangles_csv, write_json, write_ply, write_triangles_csv, TRIANGLES_CSV_HEADER,
-};
-use antiradiance::render::{
+use antiradiance::output::render::{
     render_png, render_rgb, render_rgb_shaded, resolve_view, tone_map, CameraOptions, Shading,
     BACK_FACE_RGB,
 };
+use antiradiance::output::{
+    read_triangles_csv, write_json, write_ply, write_triangles_csv, TRIANGLES_CSV_HEADER,
+};
 use antiradiance::scene::Scene;
-use antiradiance::solution::{Solution, SolveStats};
+use antiradiance::solve::solution::{Solution, SolveStats};
 use antiradiance::Error;
 use glam::DVec3;
 

@@ -7,7 +7,7 @@ use antiradiance::mesh::{build_patches, Patches};
 use antiradiance::progress::Progress;
 use antiradiance::reference::{solve_reference, ReferenceOptions};
 use antiradiance::scene::Scene;
-use antiradiance::solution::Solution;
+use antiradiance::solve::solution::Solution;
 use glam::DVec3;
 
 /// Two triangles covering the planar quad a-b-c-d, ordered so their normal points along `facing`.

@@ -1,4 +1,4 @@
-//! Interactive relighting (`antiradiance::relight`): relit solutions against from-scratch
+//! Interactive relighting (`antiradiance::solve::relight`): relit solutions against from-scratch
 //! solves, warm starts, per-material emission, bad input, and the `relight` command.
 //!
 //! Scenes are small (the Cornell box, a 7-triangle test scene) so the whole file runs in
@@ -7,14 +7,14 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use antiradiance::driver::error_against;
-use antiradiance::hierarchical::solve_hierarchical;
 use antiradiance::mesh::build_patches;
 use antiradiance::progress::Progress;
-use antiradiance::relight::{frame_path, sweep_weights, Relighter};
+use antiradiance::scene::generated::{self, CORNELL_BOX_PARTS};
 use antiradiance::scene::{load_obj, Scene, SceneOptions};
-use antiradiance::scenes::{self, CORNELL_BOX_PARTS};
-use antiradiance::solution::Solution;
+use antiradiance::solve::hierarchical::solve_hierarchical;
+use antiradiance::solve::relight::{frame_path, sweep_weights, Relighter};
+use antiradiance::solve::solution::error_against;
+use antiradiance::solve::solution::Solution;
 use antiradiance::solve::SolverOptions;
 use antiradiance::Error;
 use glam::DVec3;
@@ -74,7 +74,7 @@ fn mean_red(solution: &Solution, triangles: std::ops::Range<usize>) -> f64 {
 
 #[test]
 fn relit_frames_match_from_scratch_solves_within_one_percent() {
-    let scene = scenes::cornell_box();
+    let scene = generated::cornell_box();
     let options = SolverOptions::default();
     let mut relighter = Relighter::new(&scene, None, &options).unwrap();
     let light = cornell_part("light");
@@ -127,7 +127,7 @@ fn relit_frames_match_from_scratch_solves_within_one_percent() {
 
 #[test]
 fn mixed_lights_match_from_scratch_solves_within_one_percent() {
-    let scene = scenes::cornell_box();
+    let scene = generated::cornell_box();
     let options = SolverOptions::default();
     let mut relighter = Relighter::new(&scene, None, &options).unwrap();
     let light = cornell_part("light");
@@ -189,7 +189,7 @@ fn mixed_lights_match_from_scratch_solves_within_one_percent() {
 
 #[test]
 fn scene_without_emitters_at_build_time_relights_in_scene_units() {
-    let lit = scenes::cornell_box();
+    let lit = generated::cornell_box();
     let dark = with_emission(&lit, &vec![[0.0; 3]; lit.len()]);
     let options = SolverOptions::fast();
     let mut relighter = Relighter::new(&dark, None, &options).unwrap();
@@ -235,7 +235,7 @@ fn scene_without_emitters_at_build_time_relights_in_scene_units() {
 
 #[test]
 fn warm_start_takes_fewer_iterations_than_cold_for_a_small_change() {
-    let scene = scenes::cornell_box();
+    let scene = generated::cornell_box();
     let options = SolverOptions::default();
     let mut relighter = Relighter::new(&scene, None, &options).unwrap();
     relighter.solve(&Progress::hidden());
@@ -355,7 +355,7 @@ fn scene_keeps_material_identity_per_triangle() {
     assert_eq!(scene.emission[3], [5.0; 3]);
     assert_eq!(scene.emission[5], [1.0; 3]);
     // Scenes built in code have no materials.
-    let cornell = scenes::cornell_box();
+    let cornell = generated::cornell_box();
     assert_eq!(cornell.material, vec![None; cornell.len()]);
     assert_eq!(cornell.material_name(0), None);
 }
@@ -484,7 +484,7 @@ fn bad_emission_is_rejected_and_changes_nothing() {
         Relighter::new(&Scene::default(), None, &SolverOptions::fast()),
         Err(Error::Scene { .. })
     ));
-    let other = build_patches(&scenes::cornell_box(), None);
+    let other = build_patches(&generated::cornell_box(), None);
     assert_parameter_error(
         Relighter::from_patches(&scene, other, &SolverOptions::fast()).map(|_| ()),
         "46 triangles",

@@ -9,16 +9,16 @@
 
 use std::path::{Path, PathBuf};
 
-use antiradiance::dense::solve_dense;
-use antiradiance::driver::cap_warning;
-use antiradiance::driver::error_against as error; // the design note's error, per input triangle
-use antiradiance::hierarchical::solve_hierarchical;
 use antiradiance::mesh::{build_patches, Patches};
 use antiradiance::progress::Progress;
 use antiradiance::reference::{solve_reference, ReferenceOptions};
+use antiradiance::scene::generated;
 use antiradiance::scene::Scene;
-use antiradiance::scenes;
-use antiradiance::solution::Solution;
+use antiradiance::solve::dense::solve_dense;
+use antiradiance::solve::hierarchical::solve_hierarchical;
+use antiradiance::solve::solution::error_against as error; // the design note's error, per input triangle
+use antiradiance::solve::solution::Solution;
+use antiradiance::solve::warnings::cap_warning;
 use antiradiance::solve::SolverOptions;
 use glam::DVec3;
 use serde_json::Value;
@@ -229,7 +229,7 @@ fn rel(a: f64, b: f64) -> f64 {
 /// and translation separately, on the occluder scene, are in tests/accuracy.rs.)
 #[test]
 fn scaled_and_translated_cornell_box_gives_the_same_b() {
-    let base = scenes::cornell_box();
+    let base = generated::cornell_box();
     let options = SolverOptions::default();
     let reference = solve_both(&base, &options);
     for (scale, offset) in [(1e-4, DVec3::splat(1e5)), (1e4, DVec3::new(1e5, -3e5, 7e4))] {
@@ -317,7 +317,7 @@ fn areas_from_1e_minus_8_to_1e4() {
 /// fat triangles: B = 2 within 0.5% on every triangle, slivers included.
 #[test]
 fn sliver_furnace() {
-    let furnace = scenes::furnace_box(1.0, 0.5);
+    let furnace = generated::furnace_box(1.0, 0.5);
     let mut b = Build::default();
     for q in 0..6 {
         // The quad (q0, q1, q2, q3) was stored as (q0, q1, q2), (q0, q2, q3).
@@ -413,7 +413,7 @@ fn sliver_strip_matches_a_wider_strip() {
 /// reflects some back), never less.
 #[test]
 fn coincident_triangles() {
-    let base = scenes::occluder_scene();
+    let base = generated::occluder_scene();
     let options = SolverOptions::default();
     let plate = 2..4;
     let copy = |reversed: bool| {
@@ -504,7 +504,7 @@ fn coincident_triangles() {
 /// (measured: dense 2.7%, hierarchical 1.6%).
 #[test]
 fn touching_triangles() {
-    let furnace = scenes::furnace_box(1.0, 0.5);
+    let furnace = generated::furnace_box(1.0, 0.5);
     let mut b = Build {
         tris: (0..furnace.len()).map(|t| furnace.corners(t)).collect(),
         albedo: furnace.albedo.clone(),
@@ -585,7 +585,7 @@ fn touching_triangles() {
 /// for ~7000 sweeps both solvers converge to 1000 within 0.5%.
 #[test]
 fn albedo_0999_converges_or_says_it_stopped() {
-    let scene = scenes::furnace_box(1.0, 0.999);
+    let scene = generated::furnace_box(1.0, 0.999);
     let patches = build_patches(&scene, None);
     let capped = SolverOptions::default();
     for (name, sol) in solve_both(&scene, &capped) {
@@ -658,7 +658,7 @@ fn albedo_0999_converges_or_says_it_stopped() {
 /// to up to 1.00064 and 1 / (1 - rho) amplified that into B = 1535 (+53%).
 #[test]
 fn albedo_0999_subdivided_box() {
-    let scene = scenes::subdivide(&scenes::furnace_box(1.0, 0.999), 2);
+    let scene = generated::subdivide(&generated::furnace_box(1.0, 0.999), 2);
     let options = SolverOptions {
         max_iterations: 20_000,
         ..SolverOptions::default()
@@ -682,7 +682,7 @@ fn albedo_0999_subdivided_box() {
 /// 1e-12), nothing under- or overflows, with both solvers.
 #[test]
 fn emission_1e_minus_30_and_1e30_scale_exactly() {
-    let base = scenes::cornell_box();
+    let base = generated::cornell_box();
     let options = SolverOptions::default();
     let reference = solve_both(&base, &options);
     for factor in [1e-30, 1e30] {
@@ -717,7 +717,7 @@ fn emission_1e_minus_30_and_1e30_scale_exactly() {
 /// Writes `scene` as OBJ + MTL (one material per distinct albedo/emission) into `dir`.
 fn write_scene(dir: &Path, scene: &Scene) -> PathBuf {
     let obj = dir.join("scene.obj");
-    scenes::write_obj(scene, &obj, "stability test scene").unwrap();
+    generated::write_obj(scene, &obj, "stability test scene").unwrap();
     obj
 }
 
@@ -876,7 +876,7 @@ fn extreme_scene_outputs_are_finite() {
 #[test]
 fn iteration_cap_warning_on_the_command_line() {
     let dir = tempfile::tempdir().unwrap();
-    let obj = write_scene(dir.path(), &scenes::furnace_box(1.0, 0.999));
+    let obj = write_scene(dir.path(), &generated::furnace_box(1.0, 0.999));
     let (csv, report) = (dir.path().join("t.csv"), dir.path().join("r.json"));
     // The dense solver has no extrapolation: plain Jacobi sweeps hit the cap.
     let o = run(&[

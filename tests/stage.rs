@@ -1,4 +1,4 @@
-//! `antiradiance scene` and the generators behind it (`scenes::in_room`, `scenes::under_light`):
+//! `antiradiance scene` and the generators behind it (`generated::in_room`, `generated::under_light`):
 //! the written scenes load back with the expected triangles, materials and lights, the object
 //! stands on the floor of a closed room, and bad input is one `error:` line naming the file.
 //!
@@ -8,11 +8,11 @@
 use std::path::{Path, PathBuf};
 
 use antiradiance::output::read_triangles_csv;
-use antiradiance::scene::{load_obj, Scene, SceneOptions};
-use antiradiance::scenes::{
+use antiradiance::scene::generated::{
     self, cornell_box, furnace_box, in_room, light_above, room_around, subdivided_cornell_box,
     under_light, write_obj, LIGHT_TRIANGLES, ROOM_FLOOR_ALBEDO, ROOM_TRIANGLES, ROOM_WALL_ALBEDO,
 };
+use antiradiance::scene::{load_obj, Scene, SceneOptions};
 use antiradiance::Error;
 use glam::DVec3;
 
@@ -59,7 +59,9 @@ fn assert_object_kept(object: &Scene, scene: &Scene) {
         assert_eq!(object.corners(t), scene.corners(t), "corners of {t}");
         assert_eq!(object.albedo[t], scene.albedo[t], "albedo of {t}");
         assert_eq!(object.emission[t], scene.emission[t], "emission of {t}");
-        let expected = object.material_name(t).unwrap_or(scenes::OBJECT_MATERIAL);
+        let expected = object
+            .material_name(t)
+            .unwrap_or(generated::OBJECT_MATERIAL);
         assert_eq!(scene.material_name(t), Some(expected), "material of {t}");
     }
 }

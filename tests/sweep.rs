@@ -4,18 +4,22 @@
 
 use std::path::{Path, PathBuf};
 
-use antiradiance::dense::solve_dense;
-use antiradiance::direct::{solve_dense_direct, solve_hierarchical_direct};
-use antiradiance::driver::error_against as error; // the design note's error, per input triangle
-use antiradiance::hierarchical::solve_hierarchical;
 use antiradiance::mesh::{build_patches, Patches};
 use antiradiance::progress::Progress;
 use antiradiance::reference::{solve_reference, ReferenceOptions};
+use antiradiance::scene::generated;
 use antiradiance::scene::Scene;
-use antiradiance::scenes;
-use antiradiance::solution::Solution;
+use antiradiance::solve::dense::solve_dense;
+use antiradiance::solve::direct::{solve_dense_direct, solve_hierarchical_direct};
+use antiradiance::solve::hierarchical::solve_hierarchical;
+use antiradiance::solve::solution::error_against as error; // the design note's error, per input triangle
+use antiradiance::solve::solution::Solution;
 use antiradiance::solve::SolverOptions;
-use antiradiance::sweep::CSV_HEADER;
+
+/// The header of `sweep --csv` (the format the docs describe).
+const CSV_HEADER: &str = "run,preset,solver,epsilon,bins,tol,max_iterations,direct_light,\
+seconds,cpu_seconds,iterations,converged,residual,links,peak_memory_delta_bytes,negative_fraction,\
+error,pareto";
 use glam::DVec3;
 
 mod common;
@@ -188,7 +192,7 @@ fn sweep_writes_one_row_per_run_and_a_plot() {
     assert!(plot.contains("Pareto front") && plot.contains("direct light on"));
     assert!(plot.matches("<circle").count() >= rows.len());
     let saved = antiradiance::output::read_triangles_csv(&reference).unwrap();
-    assert_eq!(saved.len(), scenes::occluder_scene().len());
+    assert_eq!(saved.len(), generated::occluder_scene().len());
 
     // The saved reference feeds a second sweep: dense, one run, no epsilon column value.
     let csv2 = dir.path().join("dense.csv");
@@ -320,7 +324,7 @@ fn direct_light_flag_reaches_the_report() {
 #[test]
 fn direct_light_furnace_keeps_b_equal_e_over_one_minus_rho() {
     for (emission, albedo) in [(1.0, 0.5), (2.0, 0.8)] {
-        let scene = scenes::furnace_box(emission, albedo);
+        let scene = generated::furnace_box(emission, albedo);
         let patches = build_patches(&scene, Some(0.25));
         let expect = emission / (1.0 - albedo);
         let options = SolverOptions {
@@ -393,7 +397,7 @@ fn direct_light_leaves_a_full_umbra_black() {
 
 #[test]
 fn direct_light_is_at_least_as_close_to_the_path_tracer_on_the_occluder_scene() {
-    let scene = scenes::occluder_scene();
+    let scene = generated::occluder_scene();
     let patches = build_patches(&scene, None);
     let truth = solve_reference(
         &patches,

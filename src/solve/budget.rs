@@ -4,7 +4,7 @@
 //!
 //! Every solver asks here before its large allocations:
 //!
-//! - the hierarchical solver's link traversal ([`crate::links::refine`]) counts the cluster links
+//! - the hierarchical solver's link traversal ([`crate::hierarchy::links::refine`]) counts the cluster links
 //!   and exact pairs it records and stops with [`OverBudget`] as soon as the estimate of what the
 //!   finished model will hold ([`HierarchicalCosts::bytes`]) exceeds the budget (checked per
 //!   round and every [`CHECK_EVERY`] node pairs of each parallel task); the exact couplings are
@@ -14,7 +14,7 @@
 //! - the exact direct light ([`direct_light_bytes`]) is skipped when it does not fit;
 //! - the dense solver ([`dense_bytes`]) refuses with [`Error::Memory`] when it does not fit.
 //!
-//! When the hierarchical model does not fit, [`Prepared::new`](crate::hierarchical::Prepared::new)
+//! When the hierarchical model does not fit, [`Prepared::new`](crate::solve::hierarchical::Prepared::new)
 //! coarsens it step by step: the pair cache off first, then epsilon doubled up to
 //! [`MAX_COARSE_EPSILON`], then the split depth lowered by two down to 0, then two bins per side
 //! fewer down to [`MIN_COARSE_BINS`] ([`coarser`]).
@@ -22,16 +22,16 @@
 //! large arrays are allocated. What was coarsened is reported ([`MemoryStats`]).
 //!
 //! Sizes are in bytes; the suffixes of [`parse_size`] and the figures of
-//! [`crate::driver::format_bytes`] are powers of 1024.
+//! [`crate::solve::memory::format_bytes`] are powers of 1024.
 
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 use serde::Serialize;
 
 use crate::error::Error;
+use crate::hierarchy::links::ClusterLink;
 use crate::hierarchy::Node;
-use crate::links::ClusterLink;
-use crate::memory;
+use crate::solve::memory;
 use crate::solve::SolverOptions;
 use crate::transport::{Entry, PatchGeom};
 
@@ -180,7 +180,7 @@ impl Budget {
     /// refinement stopped early counts what it had recorded) and does not fit, with `advice`
     /// (what to change) at the end.
     pub fn does_not_fit(&self, what: &str, bytes: u64, advice: &str) -> Error {
-        let fmt = crate::driver::format_bytes;
+        let fmt = crate::solve::memory::format_bytes;
         let used = if self.base > 0 {
             format!(" beside the {} the process already holds", fmt(self.base))
         } else {

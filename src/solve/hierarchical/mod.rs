@@ -10,26 +10,28 @@
 //!    couplings of its element links (the same [`crate::transport::couple`] as the dense solver);
 //! 3. every element forms `B = E + rho H` and its new antiradiance bins.
 
+pub mod model;
+
 use std::time::Instant;
 
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::accelerate::Anderson;
-use crate::bins::Bins;
-use crate::budget::{
+use crate::error::Result;
+use crate::geometry::bins::Bins;
+use crate::hierarchy::links::{self, ClusterLink, LinkParams, Links};
+use crate::hierarchy::{ClusterTree, NONE};
+use crate::mesh::Patches;
+use crate::progress::Progress;
+use crate::solve::accelerate::Anderson;
+use crate::solve::budget::{
     self, Budget, HierarchicalCosts, LinkBudget, MemoryStats, ModelCounts, OverBudget,
 };
-use crate::error::Result;
-use crate::health::{self, Guard};
-use crate::hierarchy::{ClusterTree, NONE};
-use crate::links::{self, ClusterLink, LinkParams, Links};
-use crate::mesh::Patches;
-use crate::model::{self, ModelStats};
-use crate::progress::Progress;
-use crate::solution::{Solution, SolveStats};
+use crate::solve::health::{self, Guard};
+use crate::solve::solution::{Solution, SolveStats};
 use crate::solve::{change_ratio, finish, Convergence, SolverOptions};
 use crate::transport::gather_entries;
+use model::ModelStats;
 
 /// Time spent in each stage of a hierarchical solve, seconds.
 #[derive(Clone, Debug, Default, serde::Serialize)]
@@ -167,7 +169,7 @@ fn channels_needed(patches: &Patches) -> usize {
 
 impl Prepared {
     /// Builds the tree and refines the links for `patches` within the memory limit of
-    /// `options` ([`SolverOptions::memory_limit_bytes`], see [`crate::budget`]): a model whose
+    /// `options` ([`SolverOptions::memory_limit_bytes`], see [`crate::solve::budget`]): a model whose
     /// estimate does not fit is coarsened step by step ([`budget::coarser`]; the pair cache is
     /// left out first), and [`Prepared::memory`] says what was changed. `record_culled` keeps
     /// the culled pairs (for [`links::validate`]).
@@ -471,7 +473,7 @@ impl Prepared {
     /// scene (same element count and stored bins), else starts from the source.
     ///
     /// Solves one channel when the albedos and the source are grey, three otherwise
-    /// ([`crate::model`]); the returned solution is RGB either way.
+    /// ([`crate::solve::hierarchical::model`]); the returned solution is RGB either way.
     ///
     /// # Panics
     /// When `elem_source.len() != self.element_count()`.
@@ -793,13 +795,13 @@ impl Prepared {
             .collect();
         self.timings.iterate = t0.elapsed().as_secs_f64();
         stats.stage_seconds = Some(self.timings.clone());
-        stats.link_stats = Some(crate::solution::LinkReport {
+        stats.link_stats = Some(crate::solve::solution::LinkReport {
             cluster_links: self.links.cluster.len() as u64,
             exact_links: self.links.exact_sender.len() as u64,
             refinement: self.links.stats.clone(),
         });
         stats.elements = n;
-        memory.peak_bytes = crate::memory::peak_rss_bytes();
+        memory.peak_bytes = crate::solve::memory::peak_rss_bytes();
         stats.memory = Some(memory);
         // The result is checked against the bound of this solve's source (with exact direct
         // light, the reflected direct light: a tighter bound than the emission's).
@@ -1584,7 +1586,7 @@ impl FromF64 for f32 {
 mod tests {
     use super::*;
     use crate::mesh::build_patches;
-    use crate::scenes;
+    use crate::scene::generated;
 
     impl LiveBins {
         /// Every bin of every element stored.
@@ -1605,7 +1607,7 @@ mod tests {
     /// antiradiance and for a bin count above 64 (several mask words).
     #[test]
     fn live_bins_give_the_result_of_every_bin() {
-        let patches = build_patches(&scenes::cornell_box(), Some(150.0));
+        let patches = build_patches(&generated::cornell_box(), Some(150.0));
         for (bins, two_sided) in [(8, false), (8, true), (9, false)] {
             let options = SolverOptions {
                 bins,
@@ -1638,7 +1640,7 @@ mod tests {
     /// so, instead of taking the overflow's zero change for convergence.
     #[test]
     fn an_overflowing_iteration_is_reported_as_diverged() {
-        let mut patches = build_patches(&scenes::cornell_box(), None);
+        let mut patches = build_patches(&generated::cornell_box(), None);
         for a in &mut patches.albedo {
             *a = a.map(|x| 100.0 * x.max(0.5));
         }
@@ -1649,7 +1651,7 @@ mod tests {
         let hidden = Progress::hidden();
         for solution in [
             solve_hierarchical(&patches, &options, &hidden).unwrap(),
-            crate::dense::solve_dense(&patches, &options, &hidden).unwrap(),
+            crate::solve::dense::solve_dense(&patches, &options, &hidden).unwrap(),
         ] {
             let stats = &solution.stats;
             assert!(stats.failure.is_some() && !stats.converged, "{stats:?}");

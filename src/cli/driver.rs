@@ -19,25 +19,24 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use clap::{Args, ValueEnum};
+use clap::Args;
 use glam::DVec3;
 use serde::Serialize;
 use serde_json::{json, Map, Value};
 
-use crate::error::{Error, Result};
-use crate::mesh::{self, Patches};
-use crate::progress::Progress;
-use crate::reference::{self, ReferenceOptions};
-use crate::render::{self, CameraOptions, Shading};
-use crate::scene::{self, Scene, SceneOptions};
-use crate::solution::{self, Solution, SolveStats};
-use crate::solve::SolverOptions;
-use crate::{budget, dense, direct, geometry, hierarchical, memory, output};
-
-/// Largest number of patches `--max-edge` may split a scene into (a guard against a typo such
-/// as a length in the wrong unit, which would otherwise exhaust memory before any message; a
-/// scene that has more triangles than this to begin with is not refused).
-pub const MAX_PATCHES: u64 = 1 << 22;
+use antiradiance::error::{Error, Result};
+use antiradiance::mesh::{self, Patches};
+use antiradiance::mesh::{patch_count, MAX_PATCHES};
+use antiradiance::output;
+use antiradiance::output::render::{self, CameraOptions, Shading};
+use antiradiance::progress::Progress;
+use antiradiance::reference::{self, ReferenceOptions};
+use antiradiance::scene::{self, Scene, SceneOptions};
+use antiradiance::solve::memory::format_bytes;
+use antiradiance::solve::solution::{self, Solution, SolveStats};
+use antiradiance::solve::warnings::solve_warnings;
+use antiradiance::solve::{budget, memory};
+use antiradiance::solve::{Preset, SolverKind, SolverOptions};
 
 // ---------------------------------------------------------------------------------------------
 // Arguments
@@ -106,48 +105,6 @@ impl SceneArgs {
             "emission": self.emission,
             "max_edge": self.max_edge,
         })
-    }
-}
-
-/// Which antiradiance solver to run.
-#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum SolverKind {
-    /// Clustered links, O(n log n) (the default).
-    Hierarchical,
-    /// Every pair of patches (the oracle).
-    Dense,
-}
-
-impl SolverKind {
-    /// The name used on the command line and in reports.
-    pub fn name(self) -> &'static str {
-        match self {
-            SolverKind::Hierarchical => "hierarchical",
-            SolverKind::Dense => "dense",
-        }
-    }
-}
-
-/// A named set of solver parameters (`SolverOptions::preset`).
-#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Preset {
-    /// 6 x 6 bins, coarse links, looser tolerance.
-    Fast,
-    /// 8 x 8 bins, balanced.
-    Default,
-    /// 12 x 12 bins, fine links, tight tolerance.
-    Accurate,
-}
-
-impl Preset {
-    /// The name `SolverOptions::preset` knows.
-    pub fn name(self) -> &'static str {
-        match self {
-            Preset::Fast => "fast",
-            Preset::Default => "default",
-            Preset::Accurate => "accurate",
-        }
     }
 }
 
@@ -505,22 +462,6 @@ fn resolved(path: &Path) -> PathBuf {
     }
 }
 
-/// Number of patches [`mesh::build_patches`] makes from `scene` with `max_edge` (each
-/// non-degenerate triangle becomes k*k pieces, k = ceil(longest edge / max_edge) in 1..=1024).
-pub fn patch_count(scene: &Scene, max_edge: Option<f64>) -> u64 {
-    (0..scene.len())
-        .map(|t| match max_edge {
-            Some(l) if l > 0.0 && l.is_finite() && !scene.is_degenerate(t) => {
-                let k = (geometry::longest_edge(&scene.corners(t)) / l)
-                    .ceil()
-                    .clamp(1.0, 1024.0) as u64;
-                k * k
-            }
-            _ => 1,
-        })
-        .sum()
-}
-
 // ---------------------------------------------------------------------------------------------
 // Stages
 
@@ -579,11 +520,8 @@ pub fn load(args: &SceneArgs, timings: &mut Timings) -> Result<Loaded> {
     Ok(Loaded { scene, patches })
 }
 
-/// Stage 4 for the antiradiance solvers, with a progress bar unless `quiet`.
-/// Precondition: `options.validate()` passed.
-///
-/// Errors: [`Error::Memory`] when the solve does not fit `options.memory_limit_bytes` (see
-/// [`crate::budget`]).
+/// Stage 4 for the antiradiance solvers ([`antiradiance::solve::run`]), with a progress bar
+/// unless `quiet`. Precondition: `options.validate()` passed.
 pub fn run_solver(
     kind: SolverKind,
     patches: &Patches,
@@ -591,170 +529,9 @@ pub fn run_solver(
     quiet: bool,
 ) -> Result<Solution> {
     let progress = Progress::new(kind.name(), options.max_iterations as u64, !quiet);
-    let solution = match (kind, options.direct_light) {
-        (SolverKind::Dense, false) => dense::solve_dense(patches, options, &progress),
-        (SolverKind::Hierarchical, false) => {
-            hierarchical::solve_hierarchical(patches, options, &progress)
-        }
-        (SolverKind::Dense, true) => direct::solve_dense_direct(patches, options, &progress),
-        (SolverKind::Hierarchical, true) => {
-            direct::solve_hierarchical_direct(patches, options, &progress)
-        }
-    };
+    let solution = antiradiance::solve::run(kind, patches, options, &progress);
     progress.finish();
-    let mut solution = solution?;
-    // Degenerate and duplicate triangles' patches get the values the model fixes for them,
-    // whatever the solver left there.
-    solution.settle_inactive(patches);
-    Ok(solution)
-}
-
-/// The warnings of one antiradiance solve: memory limit ([`memory_warning`]), iteration cap
-/// ([`cap_warning`]), skipped direct light ([`direct_light_warning`]), capped form-factor rows
-/// ([`capped_rows_warning`]), much negative radiance ([`negative_warning`]) and radiance above
-/// the bound ([`bound_warning`]). A failed solve is not warned about here: it is an error
-/// ([`SolveStats::check`]).
-pub fn solve_warnings(
-    kind: SolverKind,
-    stats: &SolveStats,
-    options: &SolverOptions,
-    patches: &Patches,
-) -> Vec<String> {
-    memory_warning(stats.memory.as_ref())
-        .into_iter()
-        .chain(cap_warning(kind.name(), stats, options, patches))
-        .chain(direct_light_warning(stats, options))
-        .chain(capped_rows_warning(kind.name(), stats))
-        .chain(negative_warning(kind.name(), stats, options))
-        .chain(bound_warning(kind.name(), stats))
-        .collect()
-}
-
-/// The warning for a solve whose largest B is above 1 + [`crate::health::BOUND_WARNING`] times
-/// the bound `E_max / (1 - rho_max)` (but not above 1 + [`crate::health::BOUND_SLACK`], which
-/// fails the solve); `None` otherwise.
-pub fn bound_warning(solver: &str, stats: &SolveStats) -> Option<String> {
-    let ratio = stats.largest_b_over_bound;
-    (stats.failure.is_none() && ratio > 1.0 + crate::health::BOUND_WARNING).then(|| {
-        format!(
-            "the {solver} solver's largest radiance is {ratio:.3} times the bound E_max/(1 - rho_max) = {:.6} the emission and albedos allow: some patches are brighter than the light can make them (cluster links or antiradiance bins too coarse; a smaller --epsilon or more --bins usually lowers it)",
-            stats.radiance_bound
-        )
-    })
-}
-
-/// The warning for a solve that scaled form-factor rows down to 1 (a convex enclosure whose
-/// rows summed above 1 + [`crate::health::ROW_SUM_TOLERANCE`]; `None` when none was).
-pub fn capped_rows_warning(solver: &str, stats: &SolveStats) -> Option<String> {
-    (stats.capped_rows > 0).then(|| {
-        format!(
-            "the {solver} solver scaled {} down to 1: in this convex enclosure their form factors summed to up to {:.6} (more than 1 + {:.0e}, discretization error that 1/(1 - rho) would amplify)",
-            plural(stats.capped_rows, "form-factor row", "form-factor rows"),
-            stats.max_row_sum,
-            crate::health::ROW_SUM_TOLERANCE
-        )
-    })
-}
-
-/// The warning for a solve whose negative radiance mass is above
-/// [`crate::health::NEGATIVE_WARNING`] of the positive (but not above
-/// [`crate::health::NEGATIVE_LIMIT`], which fails the solve); `None` otherwise.
-pub fn negative_warning(
-    solver: &str,
-    stats: &SolveStats,
-    options: &SolverOptions,
-) -> Option<String> {
-    (stats.failure.is_none() && stats.negative_fraction > crate::health::NEGATIVE_WARNING).then(|| {
-        format!(
-            "the {solver} solver's negative radiance is {:.1}% of the positive mass (more than {:.0}%): antiradiance cancelled more light than it should{}; more --bins usually lowers it",
-            100.0 * stats.negative_fraction,
-            100.0 * crate::health::NEGATIVE_WARNING,
-            if options.two_sided {
-                ", which two-sided antiradiance does where surfaces are doubled back to back"
-            } else {
-                ""
-            }
-        )
-    })
-}
-
-/// The warning for a solve that was changed to fit its memory limit (`None` when nothing was):
-/// the limit, what was coarsened, and the estimate of the model solved.
-pub fn memory_warning(memory: Option<&budget::MemoryStats>) -> Option<String> {
-    let m = memory?;
-    if m.coarsened.is_empty() {
-        return None;
-    }
-    Some(format!(
-        "the model was coarsened to fit the memory limit of {} (--memory-limit): {}; its estimate is {} beside the {} in use before the solve; the result is less accurate than asked",
-        format_bytes(m.limit_bytes),
-        m.coarsened.join(", "),
-        format_bytes(m.estimate_bytes),
-        format_bytes(m.base_bytes)
-    ))
-}
-
-/// The warning for a solve that was asked for exact direct light but skipped it because the
-/// scene's emitters were over [`direct::DIRECT_LIGHT_BUDGET`] (`None` otherwise; a direct light
-/// skipped to fit the memory limit is in [`memory_warning`]).
-pub fn direct_light_warning(stats: &SolveStats, options: &SolverOptions) -> Option<String> {
-    let for_memory = stats
-        .memory
-        .as_ref()
-        .is_some_and(|m| m.coarsened.iter().any(|c| c == direct::DIRECT_LIGHT_OFF));
-    (options.direct_light && stats.direct_light_skipped && !for_memory).then(|| {
-        format!(
-            "exact direct light skipped: receivers x emitter groups is over {:.0e} or the shadow rays over {:.0e}; antiradiance carried every bounce (--no-direct-light silences this)",
-            direct::DIRECT_LIGHT_BUDGET as f64,
-            direct::MAX_SHADOW_RAYS as f64
-        )
-    })
-}
-
-/// The warning for a solve that stopped at the iteration cap (`None` when it converged or
-/// diverged): the
-/// solver, the iterations, the last residual against the tolerance and, since the residual
-/// underestimates the remaining error when the iteration contracts slowly, an estimate of that
-/// error and of the iterations still needed, taking the contraction per sweep to be the highest
-/// albedo of the scene (exact for a closed box of one albedo, an upper bound otherwise).
-pub fn cap_warning(
-    solver: &str,
-    stats: &SolveStats,
-    options: &SolverOptions,
-    patches: &Patches,
-) -> Option<String> {
-    if stats.converged || stats.failure.is_some() {
-        return None;
-    }
-    let rho = (0..patches.len())
-        .filter(|&p| patches.active[p])
-        .flat_map(|p| patches.albedo[p])
-        .fold(0.0f64, f64::max)
-        .min(0.9999);
-    let r = solution::sanitize(stats.residual);
-    let mut text = format!(
-        "the {solver} solver stopped at the iteration cap ({} iterations) without converging: last residual {r:.2e}, tolerance {:.1e}; the result is not the converged solution",
-        stats.iterations, options.tol
-    );
-    if rho > 0.0 && r > 0.0 {
-        let remaining = r * rho / (1.0 - rho);
-        let more = ((options.tol * (1.0 - rho) / (r * rho)).ln() / rho.ln()).ceil();
-        text += &format!(
-            " (its remaining error may be as large as {:.2}% of B: residual x rho/(1 - rho) with the highest albedo rho = {rho})",
-            100.0 * remaining
-        );
-        if more.is_finite() && more > 0.0 {
-            text += &format!(
-                "; raise --max-iterations (to about {} at this rate)",
-                stats.iterations as f64 + more
-            );
-        } else {
-            text += "; raise --max-iterations or --tol";
-        }
-    } else {
-        text += "; raise --max-iterations or --tol";
-    }
-    Some(text)
+    solution
 }
 
 /// Stage 4 for the path tracer, with a progress bar unless `quiet`.
@@ -927,18 +704,6 @@ pub fn stats_json(stats: &SolveStats, loaded: &Loaded) -> Value {
         map.insert("mesh".into(), mesh);
     }
     value
-}
-
-/// The design-note error of `estimate` against `truth`, per input triangle of `scene`.
-pub fn error_against(scene: &Scene, estimate: &Solution, truth: &Solution) -> f64 {
-    let areas: Vec<f64> = (0..scene.len()).map(|t| scene.area(t)).collect();
-    let emissive: Vec<bool> = (0..scene.len()).map(|t| scene.is_emitter(t)).collect();
-    solution::relative_error(
-        &areas,
-        &emissive,
-        &estimate.triangle_radiance,
-        &truth.triangle_radiance,
-    )
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1137,7 +902,7 @@ pub fn compare(args: &CompareArgs) -> Result<()> {
         timings.solve += seconds;
         (solution, seconds, delta)
     });
-    let between = error_against(&loaded.scene, &runs[1].1, &runs[0].1);
+    let between = solution::error_against(&loaded.scene, &runs[1].1, &runs[0].1);
     timings.total = start.elapsed().as_secs_f64();
     overall_peak = overall_peak.max(memory::peak_rss_bytes());
 
@@ -1151,7 +916,7 @@ pub fn compare(args: &CompareArgs) -> Result<()> {
                 stats: stats_json(&solution.stats, &loaded),
                 error_vs_reference: reference
                     .as_ref()
-                    .map(|r| error_against(&loaded.scene, solution, &r.0)),
+                    .map(|r| solution::error_against(&loaded.scene, solution, &r.0)),
             },
         ));
     }
@@ -1217,16 +982,6 @@ pub fn one_line(text: &str) -> String {
         .filter(|s| !s.is_empty())
         .collect::<Vec<_>>()
         .join(" ")
-}
-
-/// Bytes as a short human figure (MB or GB).
-pub fn format_bytes(bytes: u64) -> String {
-    let mb = bytes as f64 / (1024.0 * 1024.0);
-    if mb >= 1024.0 {
-        format!("{:.2} GB", mb / 1024.0)
-    } else {
-        format!("{mb:.1} MB")
-    }
 }
 
 /// `n` and the noun in singular or plural (`plural(2, "patch", "patches")`).
@@ -1392,7 +1147,7 @@ mod tests {
 
     #[test]
     fn patch_count_matches_build_patches() {
-        let scene = crate::scenes::occluder_scene();
+        let scene = antiradiance::scene::generated::occluder_scene();
         for max_edge in [None, Some(10.0), Some(0.3), Some(0.07)] {
             assert_eq!(
                 patch_count(&scene, max_edge),

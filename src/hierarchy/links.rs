@@ -4,9 +4,9 @@
 
 use rayon::prelude::*;
 
-use crate::bins::Bins;
-use crate::budget::{self, LinkBudget, Meter, ModelCounts, OverBudget};
+use crate::geometry::bins::Bins;
 use crate::hierarchy::ClusterTree;
+use crate::solve::budget::{self, LinkBudget, Meter, ModelCounts, OverBudget};
 use crate::transport::{couple, Coupling, CouplingParams, Entry, PatchGeom, Receiver};
 
 /// Parameters of link refinement.

@@ -10,14 +10,14 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 use rayon::prelude::*;
 
-use crate::bins::Bins;
-use crate::budget::{self, Budget, MemoryStats};
 use crate::error::Result;
-use crate::health::{self, Guard};
+use crate::geometry::bins::Bins;
 use crate::mesh::Patches;
-use crate::model;
 use crate::progress::Progress;
-use crate::solution::{Solution, SolveStats};
+use crate::solve::budget::{self, Budget, MemoryStats};
+use crate::solve::health::{self, Guard};
+use crate::solve::hierarchical::model;
+use crate::solve::solution::{Solution, SolveStats};
 use crate::solve::{
     change_ratio, change_sums, finish, source_and_albedo_max, Convergence, SolverOptions,
 };
@@ -32,7 +32,7 @@ type NearList = Vec<(u32, Coupling)>;
 /// previous sweep's values, until the estimated remaining error is under `options.tol` or the
 /// iteration cap is reached (then `stats.converged` is false). Every sweep is checked by a
 /// [`Guard`] (NaN or infinity, growth, radiance beyond the bound) and the result by
-/// [`finish`]; a solve that fails stops there with `stats.failure` set ([`crate::health`]). In
+/// [`finish`]; a solve that fails stops there with `stats.failure` set ([`crate::solve::health`]). In
 /// a convex enclosure a receiver's form-factor row above 1 + [`health::ROW_SUM_TOLERANCE`] is
 /// scaled down to 1 (`stats.capped_rows`).
 ///
@@ -49,7 +49,7 @@ pub fn solve_dense(
     let nb = bins.len();
     let n = patches.len();
     let params = options.coupling();
-    let back = crate::model::back_blocking(patches, options);
+    let back = crate::solve::hierarchical::model::back_blocking(patches, options);
     let budget = Budget::start(options.memory_limit_bytes);
     let estimate = budget::dense_bytes(n as u64, options.bins, options.near_quadrature);
     let refuse = |bytes: u64| {
@@ -263,7 +263,7 @@ pub fn solve_dense(
         limit_bytes: budget.limit,
         base_bytes: budget.base,
         estimate_bytes: estimate + near_bytes,
-        peak_bytes: crate::memory::peak_rss_bytes(),
+        peak_bytes: crate::solve::memory::peak_rss_bytes(),
         coarsened: Vec::new(),
         attempts: 0,
         epsilon: 0.0,

@@ -7,7 +7,7 @@
 //! and any previous file there is kept intact. Errors are one line naming the target path.
 //!
 //! No NaN or infinity ever reaches a file: every number is passed through
-//! [`crate::solution::sanitize`] (non-finite becomes 0) even though solvers already sanitize.
+//! [`crate::solve::solution::sanitize`] (non-finite becomes 0) even though solvers already sanitize.
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -16,9 +16,10 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use crate::error::{Error, Result};
 use crate::mesh::Patches;
-use crate::render;
+pub mod render;
+
 use crate::scene::Scene;
-use crate::solution::{sanitize, Solution};
+use crate::solve::solution::{sanitize, Solution};
 
 /// The exact header line of the per-triangle CSV (without the line break).
 pub const TRIANGLES_CSV_HEADER: &str = "index,area,emissive,r,g,b";

@@ -4,6 +4,10 @@
 //! every kernel here is analytic (no sampling), so it stays finite for neighbours that share an edge
 //! or a vertex. All tolerances of the crate live in this module.
 
+pub mod bins;
+pub mod raytrace;
+pub mod sampling;
+
 use glam::DVec3;
 
 /// Relative tolerance for "this point lies in that plane": distances below
@@ -538,7 +542,7 @@ mod tests {
 
     #[test]
     fn atan2_upper_matches_libm() {
-        let mut rng = crate::sampling::Rng::new(7, 0);
+        let mut rng = crate::geometry::sampling::Rng::new(7, 0);
         let mut rnd = || rng.next_f64();
         for _ in 0..100_000 {
             let (y, x) = (rnd() * 3.0, rnd() * 4.0 - 2.0);
@@ -561,7 +565,7 @@ mod tests {
 
     #[test]
     fn lanes_match_one_point_kernel() {
-        let mut rng = crate::sampling::Rng::new(11, 0);
+        let mut rng = crate::geometry::sampling::Rng::new(11, 0);
         let mut rnd = || rng.next_f64() * 2.0 - 1.0;
         let mut worst = 0.0f64;
         for case in 0..20_000 {

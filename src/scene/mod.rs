@@ -5,6 +5,10 @@
 //! scene translated far from the origin keeps its precision. Every line-level problem is reported as
 //! `file:line: message` before tobj ever sees the file (tobj 4.0.5 panics on some malformed lines).
 
+pub mod generated;
+pub mod interiors;
+pub mod variants;
+
 use std::collections::{hash_map, HashMap};
 use std::path::{Path, PathBuf};
 

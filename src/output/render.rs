@@ -43,7 +43,7 @@ use glam::DVec3;
 use crate::error::{Error, Result};
 use crate::mesh::Patches;
 use crate::output::write_atomic;
-use crate::solution::{sanitize, Solution};
+use crate::solve::solution::{sanitize, Solution};
 
 /// The colour (sRGB, 8 bit) of every pixel where the back side of a triangle is seen.
 pub const BACK_FACE_RGB: [u8; 3] = [40, 40, 40];

@@ -133,6 +133,31 @@ impl Patches {
     }
 }
 
+/// Largest number of patches a `max_edge` may split a scene into (a guard against a typo such
+/// as a length in the wrong unit, which would otherwise exhaust memory before any message; a
+/// scene that has more triangles than this to begin with is not refused).
+pub const MAX_PATCHES: u64 = 1 << 22;
+
+/// The split of one input triangle (world corners): [`build_patches`] cuts it into k*k pieces,
+/// k = ceil(longest edge / max_edge) in 1..=1024; 1 for a degenerate triangle and for a
+/// `max_edge` that is `None`, not positive or not finite.
+pub fn split_factor(world: &Tri, degenerate: bool, max_edge: Option<f64>) -> u64 {
+    match max_edge {
+        Some(l) if l > 0.0 && l.is_finite() && !degenerate => (geometry::longest_edge(world) / l)
+            .ceil()
+            .clamp(1.0, 1024.0)
+            as u64,
+        _ => 1,
+    }
+}
+
+/// Number of patches [`build_patches`] makes from `scene` with `max_edge`, without making them.
+pub fn patch_count(scene: &Scene, max_edge: Option<f64>) -> u64 {
+    (0..scene.len())
+        .map(|t| split_factor(&scene.corners(t), scene.is_degenerate(t), max_edge).pow(2))
+        .sum()
+}
+
 /// Builds the patches of a scene. Each input triangle whose longest edge exceeds `max_edge`
 /// (world units) is split into k*k congruent pieces, k = ceil(longest / max_edge).
 ///
@@ -178,14 +203,7 @@ pub fn build_patches(scene: &Scene, max_edge: Option<f64>) -> Patches {
         let emission = scene.emission[t].map(|e| e / emission_scale);
         let degenerate = scene.is_degenerate(t);
         let active = !degenerate && patches.twin[t].is_none();
-        let k = match max_edge {
-            Some(l) if l > 0.0 && l.is_finite() && !degenerate => {
-                (geometry::longest_edge(&world) / l)
-                    .ceil()
-                    .clamp(1.0, 1024.0) as usize
-            }
-            _ => 1,
-        };
+        let k = split_factor(&world, degenerate, max_edge) as usize;
         for piece in geometry::subdivide(&unit, k) {
             patches.push(piece, t as u32, scene.albedo[t], emission, active);
         }

@@ -34,24 +34,24 @@
 //! control variate, leaves noise of either sign in umbrae.)
 //!
 //! Sampling is seeded per element (the element's index), so results are reproducible and do not
-//! depend on thread scheduling. Shadow rays use the watertight test of [`crate::raytrace`].
+//! depend on thread scheduling. Shadow rays use the watertight test of [`crate::geometry::raytrace`].
 
 use std::f64::consts::PI;
 
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::budget::{self, Budget};
-use crate::dense;
 use crate::error::Result;
+use crate::geometry::raytrace::RayScene;
+use crate::geometry::sampling::{point_on_triangle, Rng};
 use crate::geometry::{self, plane_tol, PLANE_EPS};
-use crate::health::FailureKind;
-use crate::hierarchical::{Element, Prepared};
 use crate::mesh::Patches;
 use crate::progress::Progress;
-use crate::raytrace::RayScene;
-use crate::sampling::{point_on_triangle, Rng};
-use crate::solution::{Solution, SolveStats};
+use crate::solve::budget::{self, Budget};
+use crate::solve::dense;
+use crate::solve::health::FailureKind;
+use crate::solve::hierarchical::{Element, Prepared};
+use crate::solve::solution::{Solution, SolveStats};
 use crate::solve::{emission_bound, finish, SolverOptions};
 use crate::transport::{separation, PatchGeom, FAR_RATIO};
 
@@ -478,7 +478,7 @@ impl<'a> DirectLight<'a> {
             patches,
             groups: group_emitters(&emitters),
             emitters,
-            rays: RayScene::new(patches),
+            rays: RayScene::new(&patches.corners, &patches.active),
             samples: shadow_samples(receivers),
         }
     }
@@ -1180,8 +1180,8 @@ fn without_negative_check(mut stats: SolveStats) -> SolveStats {
 mod tests {
     use super::*;
     use crate::mesh::build_patches;
+    use crate::scene::generated;
     use crate::scene::Scene;
-    use crate::scenes;
 
     /// A 1 x 1 emitter (facing down, split into 4 x 4 x 2 triangles so it forms one group)
     /// over receivers in every relation to it: below, tilted, cutting its plane, beside it in its
@@ -1194,7 +1194,7 @@ mod tests {
             [v(0.0, 1.0, 0.0), v(1.0, 1.0, 1.0), v(0.0, 1.0, 1.0)],
         ];
         let mut corners: Vec<[DVec3; 3]> = Vec::new();
-        let light_scene = scenes::subdivide(
+        let light_scene = generated::subdivide(
             &Scene::from_triangles(&light, &[[0.0; 3]; 2], &[[1.0; 3]; 2]),
             4,
         );
@@ -1309,11 +1309,11 @@ mod sampling_tests {
 mod budget_tests {
     use super::*;
     use crate::mesh::build_patches;
-    use crate::scenes;
+    use crate::scene::generated;
 
     #[test]
     fn direct_light_budget_counts_receivers_times_groups() {
-        let patches = build_patches(&scenes::cornell_box(), None);
+        let patches = build_patches(&generated::cornell_box(), None);
         let direct = DirectLight::new(&patches, patches.len());
         let groups = direct.group_count() as u64;
         assert!(groups >= 1);

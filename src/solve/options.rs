@@ -4,9 +4,9 @@
 use serde::Serialize;
 
 use crate::error::{Error, Result};
-use crate::health::{self, FailureKind, SolveFailure};
 use crate::mesh::Patches;
-use crate::solution::{sanitize, Solution, SolveStats};
+use crate::solve::health::{self, FailureKind, SolveFailure};
+use crate::solve::solution::{sanitize, Solution, SolveStats};
 use crate::transport::CouplingParams;
 
 /// Parameters of an antiradiance solve.
@@ -22,7 +22,7 @@ pub struct SolverOptions {
     /// Antiradiance from both sides of every surface. Default false: each surface blocks on
     /// the sides [`Self::block_exposed_backs`] decides.
     pub two_sided: bool,
-    /// Surfaces whose back is exposed to light ([`crate::model::exposed_backs`]: wrongly
+    /// Surfaces whose back is exposed to light ([`crate::solve::hierarchical::model::exposed_backs`]: wrongly
     /// oriented walls, open sheets) also create antiradiance from light arriving at their back,
     /// so a one-sided surface lit from behind absorbs and casts a shadow. Default true; false
     /// gives front-only antiradiance everywhere (exact for closed, consistently oriented
@@ -43,11 +43,11 @@ pub struct SolverOptions {
     /// smaller neighbour needs it finer. 0..6; 0 keeps the input mesh.
     pub split_depth: u8,
     /// Exact direct light: the first bounce from the emitters with shadow rays, antiradiance for
-    /// the indirect bounces only (see [`crate::direct`]). On in the `default` and `accurate`
+    /// the indirect bounces only (see [`crate::solve::direct`]). On in the `default` and `accurate`
     /// presets (it lowered the error on every scene measured: room 2.53% -> 2.14%, Cornell box
     /// 2.19% -> 1.17%, bear in a room 1.57% -> 0.91%), off in `fast`. Skipped, with a warning,
-    /// when the scene would cost more than [`crate::direct::DIRECT_LIGHT_BUDGET`] or
-    /// [`crate::direct::MAX_SHADOW_RAYS`].
+    /// when the scene would cost more than [`crate::solve::direct::DIRECT_LIGHT_BUDGET`] or
+    /// [`crate::solve::direct::MAX_SHADOW_RAYS`].
     pub direct_light: bool,
     /// Memory the hierarchical solver may spend caching the geometric factor of every (receiving
     /// element, cluster link) pair, MB. The cache makes each sweep a stream of multiply-adds
@@ -56,19 +56,19 @@ pub struct SolverOptions {
     /// 0 disables it. 1024 by default.
     pub pair_cache_mb: usize,
     /// Anderson acceleration of the hierarchical solver's sweeps: how many past sweeps each new
-    /// state mixes ([`crate::accelerate`]). 0 gives plain Jacobi sweeps with the tail
+    /// state mixes ([`crate::solve::accelerate`]). 0 gives plain Jacobi sweeps with the tail
     /// extrapolation. 1..8; 4 by default. The dense solver (the oracle) always sweeps plainly.
     pub acceleration_depth: usize,
     /// Most resident memory the process may hold during a solve, bytes (`--memory-limit`); what
     /// the process holds when the solve starts (scene, patches) counts against it. The solvers
-    /// estimate what they will allocate before they allocate it ([`crate::budget`]): a
+    /// estimate what they will allocate before they allocate it ([`crate::solve::budget`]): a
     /// hierarchical model that does not fit is coarsened (pair cache off, then epsilon doubled
-    /// up to [`crate::budget::MAX_COARSE_EPSILON`], then the split depth lowered to 0, then
-    /// fewer bins down to [`crate::budget::MIN_COARSE_BINS`] per side; see
-    /// [`crate::budget::coarser`]), the exact direct light is skipped when it
+    /// up to [`crate::solve::budget::MAX_COARSE_EPSILON`], then the split depth lowered to 0, then
+    /// fewer bins down to [`crate::solve::budget::MIN_COARSE_BINS`] per side; see
+    /// [`crate::solve::budget::coarser`]), the exact direct light is skipped when it
     /// does not fit, and a solve that cannot fit even so (or a dense solve that does not fit)
     /// ends with [`Error::Memory`] before allocating; each change is reported. At least 1;
-    /// by default half the machine's physical memory ([`crate::budget::default_memory_limit`]:
+    /// by default half the machine's physical memory ([`crate::solve::budget::default_memory_limit`]:
     /// `MemTotal` of `/proc/meminfo`, 4 GiB where that is unknown).
     pub memory_limit_bytes: u64,
 }
@@ -96,7 +96,7 @@ impl SolverOptions {
             direct_light: true,
             pair_cache_mb: 1024,
             acceleration_depth: 4,
-            memory_limit_bytes: crate::budget::default_memory_limit(),
+            memory_limit_bytes: crate::solve::budget::default_memory_limit(),
         }
     }
 
@@ -336,7 +336,7 @@ pub fn source_and_albedo_max(patches: &Patches) -> (f64, f64) {
 /// negative radiance, checks the result's health, removes non-finite values, scales back to the
 /// scene's units.
 ///
-/// The checks ([`crate::health`]): a NaN or infinity among the active patches, a largest |B|
+/// The checks ([`crate::solve::health`]): a NaN or infinity among the active patches, a largest |B|
 /// above 1 + [`health::BOUND_SLACK`] times `bound` (in the patches' normalized units: the
 /// bound [`health::radiance_bound`] of the solve's source; `None` where none holds, as for
 /// unoccluded radiosity) and negative mass above [`health::NEGATIVE_LIMIT`] of the positive

@@ -18,7 +18,7 @@
 use glam::DVec3;
 use smallvec::SmallVec;
 
-use crate::bins::Bins;
+use crate::geometry::bins::Bins;
 use crate::geometry::{self, plane_tol, Poly, Tri};
 
 /// One bin's share of a sender -> receiver coupling.

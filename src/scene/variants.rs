@@ -9,7 +9,7 @@
 //! [`map_back`] turns the variant's per-triangle radiance into per-original-triangle radiance
 //! (the area-weighted mean over the variant triangles covering each original triangle, on the
 //! side the original faces), and the design note's error measure
-//! ([`crate::solution::relative_error`]) compares it with the original's.
+//! ([`crate::solve::solution::relative_error`]) compares it with the original's.
 //!
 //! [`make_variant`] builds a [`Variant`] in memory; [`write_variant`] writes it as OBJ + MTL
 //! plus the map as CSV (`OUT.map.csv`, header [`MAP_CSV_HEADER`]), the way
@@ -27,14 +27,15 @@ use std::path::{Path, PathBuf};
 
 use glam::{DVec2, DVec3};
 
-use crate::driver::MAX_PATCHES;
 use crate::error::{Error, Result};
+use crate::geometry::sampling::{mix64, Rng};
+use crate::mesh::MAX_PATCHES;
 use crate::output::{format_f64, write_atomic};
-use crate::sampling::{mix64, Rng};
 use crate::scene::Scene;
 
 /// The kinds of bad triangulation [`make_variant`] makes.
-#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum VariantKind {
     /// Every triangle split into long slivers: k thin triangles from the vertex opposite its
     /// shortest edge to points along that edge, plus k - 1 thin triangles in the strip along the
@@ -1195,7 +1196,7 @@ fn huge_tiny(scene: &Scene, tiny: usize) -> Result<(Out, String)> {
     } else {
         let corners: Vec<[DVec3; 3]> = object.iter().map(|&t| scene.corners(t)).collect();
         let zero = vec![[0.0; 3]; object.len()];
-        crate::scenes::subdivide(&Scene::from_triangles(&corners, &zero, &zero), k)
+        crate::scene::generated::subdivide(&Scene::from_triangles(&corners, &zero, &zero), k)
     };
 
     // Which original triangles each merged triangle covers (2D overlaps in the plane, scaled

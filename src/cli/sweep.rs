@@ -20,12 +20,13 @@ use std::path::{Path, PathBuf};
 use clap::{Args, ValueEnum};
 use plotters::prelude::*;
 
-use crate::driver::{self, Loaded, Preset, SceneArgs, SolverKind, Timings};
-use crate::error::{Error, Result};
-use crate::output::{self, format_f64};
-use crate::reference::ReferenceOptions;
-use crate::solution::{relative_error, Solution};
-use crate::solve::SolverOptions;
+use crate::cli::driver::{self, Loaded, SceneArgs, Timings};
+use antiradiance::error::{Error, Result};
+use antiradiance::output::{self, format_f64};
+use antiradiance::reference::ReferenceOptions;
+use antiradiance::solve::solution::{relative_error, Solution};
+use antiradiance::solve::SolverOptions;
+use antiradiance::solve::{Preset, SolverKind};
 
 /// The exact header line of the sweep CSV (without the line break).
 pub const CSV_HEADER: &str = "run,preset,solver,epsilon,bins,tol,max_iterations,direct_light,\
@@ -435,7 +436,7 @@ pub struct RunResult {
     pub error: f64,
     /// True when no other run is at least as fast and as accurate and better in one of them.
     pub pareto: bool,
-    /// True when the solve failed its health checks ([`crate::health`]): `converged` is false,
+    /// True when the solve failed its health checks ([`antiradiance::solve::health`]): `converged` is false,
     /// `error` measures a result that is not a solution, and the run is never on the front.
     pub failed: bool,
 }
@@ -557,7 +558,9 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
             });
             let solution = solution?;
             if round == 0 {
-                if let Some(w) = driver::memory_warning(solution.stats.memory.as_ref()) {
+                if let Some(w) =
+                    antiradiance::solve::warnings::memory_warning(solution.stats.memory.as_ref())
+                {
                     eprintln!("warning: run {}/{}: {w}", i + 1, runs.len());
                 }
             }
@@ -793,7 +796,7 @@ fn table(solver: SolverKind, results: &[RunResult]) -> String {
             },
             r.links,
             r.peak_memory_delta_bytes
-                .map(driver::format_bytes)
+                .map(antiradiance::solve::memory::format_bytes)
                 .unwrap_or_else(|| "n/a".into()),
             100.0 * r.error,
             if r.pareto { "  *" } else { "" }

@@ -24,26 +24,26 @@ pub struct SolveStats {
     /// Largest receiver form-factor row sum, before any capping: the unoccluded form factors of
     /// every sender a receiver reads (through the sender's front, and through its back where
     /// antiradiance can leave it). 1 in a closed convex enclosure; above 1 wherever surfaces
-    /// stand behind one another, which is not an error (see [`crate::health`]). The dense
+    /// stand behind one another, which is not an error (see [`crate::solve::health`]). The dense
     /// solver counts every pair; the hierarchical one its exact links only, and its cluster
     /// links too in a convex enclosure (where rows are capped).
     pub max_row_sum: f64,
-    /// Receivers whose form-factor row summed above 1 + [`crate::health::ROW_SUM_TOLERANCE`] in
-    /// a convex enclosure and was scaled down to 1 (0 elsewhere: see [`crate::health`]).
+    /// Receivers whose form-factor row summed above 1 + [`crate::solve::health::ROW_SUM_TOLERANCE`] in
+    /// a convex enclosure and was scaled down to 1 (0 elsewhere: see [`crate::solve::health`]).
     pub capped_rows: usize,
     /// The bound on every B the emission and albedos allow, `E_max / (1 - rho_max)`, in the
     /// scene's radiance units (E_max the largest source radiance of the solve); 0 when none is
     /// checked (unoccluded radiosity, or no light).
     pub radiance_bound: f64,
     /// Largest |B| of the result (before clamping) over [`SolveStats::radiance_bound`]; at most
-    /// 1 for the exact model, checked against 1 + [`crate::health::BOUND_SLACK`].
+    /// 1 for the exact model, checked against 1 + [`crate::solve::health::BOUND_SLACK`].
     pub largest_b_over_bound: f64,
     /// Why the solve failed, when it did (diverged, non-finite values, radiance beyond the
-    /// bound, negative mass comparable to the positive; see [`crate::health`]). A failed solve
+    /// bound, negative mass comparable to the positive; see [`crate::solve::health`]). A failed solve
     /// has `converged == false` and its radiance is not a solution of the scene:
     /// [`SolveStats::check`] turns it into an error. Left out of the JSON when `None`.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub failure: Option<crate::health::SolveFailure>,
+    pub failure: Option<crate::solve::health::SolveFailure>,
     /// Transport links (dense: ordered patch pairs that exchange anything).
     pub links: u64,
     /// Bytes held by the solver's main arrays at their peak.
@@ -53,12 +53,12 @@ pub struct SolveStats {
     pub extrapolations: usize,
     /// What the hierarchical solver modelled (channels, antiradiance, stored bins) and what that
     /// saved; `None` for the dense solver and the path tracer.
-    pub model: Option<crate::model::ModelStats>,
+    pub model: Option<crate::solve::hierarchical::model::ModelStats>,
     /// Seconds per stage of the hierarchical solver (tree, links, model, iterate); `None` for
     /// the dense solver and the path tracer.
-    pub stage_seconds: Option<crate::hierarchical::HierarchyTimings>,
+    pub stage_seconds: Option<crate::solve::hierarchical::HierarchyTimings>,
     /// True when exact direct light was asked for but skipped: the scene's emitters would cost
-    /// more than [`crate::direct::DIRECT_LIGHT_BUDGET`] unoccluded form factors.
+    /// more than [`crate::solve::direct::DIRECT_LIGHT_BUDGET`] unoccluded form factors.
     pub direct_light_skipped: bool,
     /// The hierarchical solver's links by kind, with the refinement's counts and times; `None`
     /// for the dense solver and the path tracer.
@@ -68,11 +68,11 @@ pub struct SolveStats {
     pub elements: usize,
     /// What the memory budget did (limit, estimate, what was coarsened, peak); `None` for the
     /// path tracer.
-    pub memory: Option<crate::budget::MemoryStats>,
+    pub memory: Option<crate::solve::budget::MemoryStats>,
 }
 
 /// The links of a hierarchical solve by kind (`cluster + exact = links`), with what the
-/// refinement counted on the way ([`crate::links::LinkStats`]).
+/// refinement counted on the way ([`crate::hierarchy::links::LinkStats`]).
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct LinkReport {
     /// Cluster links (node to node, one exchange each).
@@ -80,7 +80,7 @@ pub struct LinkReport {
     /// Exact element-to-element couplings.
     pub exact_links: u64,
     /// Counts and times of the refinement.
-    pub refinement: crate::links::LinkStats,
+    pub refinement: crate::hierarchy::links::LinkStats,
 }
 
 /// A solved scene.
@@ -193,4 +193,16 @@ pub fn relative_error(
     } else {
         sum / channels as f64
     }
+}
+
+/// The design-note error of `estimate` against `truth`, per input triangle of `scene`.
+pub fn error_against(scene: &crate::scene::Scene, estimate: &Solution, truth: &Solution) -> f64 {
+    let areas: Vec<f64> = (0..scene.len()).map(|t| scene.area(t)).collect();
+    let emissive: Vec<bool> = (0..scene.len()).map(|t| scene.is_emitter(t)).collect();
+    relative_error(
+        &areas,
+        &emissive,
+        &estimate.triangle_radiance,
+        &truth.triangle_radiance,
+    )
 }

@@ -107,3 +107,13 @@ mod tests {
         }
     }
 }
+
+/// Bytes as a short human figure (MB or GB).
+pub fn format_bytes(bytes: u64) -> String {
+    let mb = bytes as f64 / (1024.0 * 1024.0);
+    if mb >= 1024.0 {
+        format!("{:.2} GB", mb / 1024.0)
+    } else {
+        format!("{mb:.1} MB")
+    }
+}

@@ -14,7 +14,6 @@ use obvhs::ray::{Ray, RayHit};
 use obvhs::{Boundable, BvhBuildParams};
 
 use crate::geometry::{Tri, RAY_EPS};
-use crate::mesh::Patches;
 
 /// Absolute padding (unit frame) of the f32 boxes the BVH is built over, so that rounding the
 /// f64 corners and rays to f32 never culls a box that holds an f64 hit.
@@ -157,7 +156,8 @@ pub struct Hit {
 
 /// The active patches with a BVH over them, for closest-hit and shadow rays.
 pub struct RayScene<'a> {
-    patches: &'a Patches,
+    /// Every patch's corners (unit frame); only the active ones are in the BVH.
+    corners: &'a [Tri],
     /// None when no patch is active.
     bvh: Option<CwBvh>,
     /// Patch index of each BVH primitive slot (already mapped through `primitive_indices`).
@@ -165,11 +165,12 @@ pub struct RayScene<'a> {
 }
 
 impl<'a> RayScene<'a> {
-    /// Builds the BVH over the active patches of `patches` (unit frame, as
-    /// [`crate::mesh::build_patches`] makes them). Inactive (zero-area) patches never block.
-    pub fn new(patches: &'a Patches) -> RayScene<'a> {
-        let active: Vec<u32> = (0..patches.len())
-            .filter(|&p| patches.active[p])
+    /// Builds the BVH over the patches `corners` whose `active` flag is set (unit frame, as
+    /// [`crate::mesh::build_patches`] makes them: `RayScene::new(&patches.corners,
+    /// &patches.active)`). Inactive (zero-area) patches never block.
+    pub fn new(corners: &'a [Tri], active: &[bool]) -> RayScene<'a> {
+        let active: Vec<u32> = (0..corners.len())
+            .filter(|&p| active[p])
             .map(|p| p as u32)
             .collect();
         let (bvh, slot_patch) = if active.is_empty() {
@@ -177,7 +178,7 @@ impl<'a> RayScene<'a> {
         } else {
             let boxes: Vec<PaddedBox> = active
                 .iter()
-                .map(|&p| padded_box(&patches.corners[p as usize]))
+                .map(|&p| padded_box(&corners[p as usize]))
                 .collect();
             let mut build_time = std::time::Duration::ZERO;
             let bvh = build_cwbvh(&boxes, BvhBuildParams::medium_build(), &mut build_time);
@@ -189,7 +190,7 @@ impl<'a> RayScene<'a> {
             (Some(bvh), slot_patch)
         };
         RayScene {
-            patches,
+            corners,
             bvh,
             slot_patch,
         }
@@ -208,7 +209,7 @@ impl<'a> RayScene<'a> {
             if patch == skip {
                 return f32::INFINITY;
             }
-            match wt.intersect(&self.patches.corners[patch], RAY_EPS, best_t) {
+            match wt.intersect(&self.corners[patch], RAY_EPS, best_t) {
                 Some(h) => {
                     best_t = h.t;
                     best = Some((patch, h));
@@ -218,7 +219,7 @@ impl<'a> RayScene<'a> {
             }
         });
         best.map(|(patch, h)| {
-            let tri = &self.patches.corners[patch];
+            let tri = &self.corners[patch];
             Hit {
                 patch,
                 t: h.t,
@@ -244,10 +245,7 @@ impl<'a> RayScene<'a> {
             if patch == skip_a || patch == skip_b {
                 return f32::INFINITY;
             }
-            if wt
-                .intersect(&self.patches.corners[patch], RAY_EPS, t_max)
-                .is_some()
-            {
+            if wt.intersect(&self.corners[patch], RAY_EPS, t_max).is_some() {
                 0.0
             } else {
                 f32::INFINITY
@@ -261,8 +259,8 @@ mod tests {
     use std::f64::consts::PI;
 
     use super::*;
-    use crate::mesh::build_patches;
-    use crate::sampling::Rng;
+    use crate::geometry::sampling::Rng;
+    use crate::mesh::{build_patches, Patches};
     use crate::scene::Scene;
 
     /// A fan of `m` triangles around `center` in a tilted plane, counter-clockwise.
@@ -293,7 +291,7 @@ mod tests {
         let m = 9;
         let (tris, center, rim) = fan(m);
         let patches = fan_patches(&tris);
-        let scene = RayScene::new(&patches);
+        let scene = RayScene::new(&patches.corners, &patches.active);
         // The fan in the unit frame (build_patches moved and scaled it).
         let frame = patches.frame;
         let c = frame.unit_from_world(center);
@@ -360,7 +358,7 @@ mod tests {
         // Negative control: rays aimed just outside the fan's rim miss it.
         let (tris, center, rim) = fan(7);
         let patches = fan_patches(&tris);
-        let scene = RayScene::new(&patches);
+        let scene = RayScene::new(&patches.corners, &patches.active);
         let frame = patches.frame;
         let c = frame.unit_from_world(center);
         let n = patches.normal[0];

@@ -15,7 +15,7 @@
 //! estimator unbiased. Paths longer than `max_depth` segments are cut.
 //!
 //! Rays are traversed with an obvhs wide BVH built over padded f32 boxes, but every ray-triangle test is
-//! ([`crate::raytrace`]) the watertight test of Woop, Benthin and Wald (2013) in f64 on the patch corners, so a ray through
+//! ([`crate::geometry::raytrace`]) the watertight test of Woop, Benthin and Wald (2013) in f64 on the patch corners, so a ray through
 //! the shared edge or vertex of two triangles never slips between them. Each patch has its own
 //! random stream derived from the seed and the patch index: results are reproducible bit for bit
 //! and independent of thread scheduling.
@@ -25,11 +25,11 @@ use std::f64::consts::PI;
 use glam::DVec3;
 use rayon::prelude::*;
 
+use crate::geometry::raytrace::RayScene;
+use crate::geometry::sampling::{cosine_direction, point_on_triangle, Rng};
 use crate::mesh::Patches;
 use crate::progress::Progress;
-use crate::raytrace::RayScene;
-use crate::sampling::{cosine_direction, point_on_triangle, Rng};
-use crate::solution::{Solution, SolveStats};
+use crate::solve::solution::{Solution, SolveStats};
 
 /// Options of the reference path tracer.
 #[derive(Clone, Debug)]
@@ -164,7 +164,7 @@ impl<'a> Tracer<'a> {
         }
         Tracer {
             patches,
-            rays: RayScene::new(patches),
+            rays: RayScene::new(&patches.corners, &patches.active),
             emitters,
             cdf,
             light_density,

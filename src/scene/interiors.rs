@@ -27,7 +27,7 @@ use std::path::PathBuf;
 
 use glam::DVec3;
 
-use crate::sampling::Rng;
+use crate::geometry::sampling::Rng;
 use crate::scene::Scene;
 
 /// Share of the non-emitting polygons written with reversed winding (each polygon reversed

@@ -7,7 +7,7 @@
 //!   element's plane) has no occlusion at all, so antiradiance would carry nothing: it is solved
 //!   as plain radiosity, with no antiradiance bins stored.
 //! - **Bins**: an element stores only the antiradiance bins some link both writes into it and
-//!   reads from it (see `LiveBins` in [`crate::hierarchical`]); with one-sided surfaces that is
+//!   reads from it (see `LiveBins` in [`crate::solve::hierarchical`]); with one-sided surfaces that is
 //!   at most the back hemisphere, and only the directions that lead to a receiver.
 //!
 //! What was decided is reported per solve in [`ModelStats`] (the JSON report's `stats.model`).
@@ -16,10 +16,10 @@ use glam::DVec3;
 use rayon::prelude::*;
 use serde::Serialize;
 
+use crate::geometry::raytrace::RayScene;
+use crate::geometry::sampling::{cosine_direction, point_on_triangle, Rng};
 use crate::hierarchy::ClusterTree;
 use crate::mesh::Patches;
-use crate::raytrace::RayScene;
-use crate::sampling::{cosine_direction, point_on_triangle, Rng};
 
 /// What the hierarchical solver modelled for one solve, and what it saved.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
@@ -72,7 +72,7 @@ pub const EXPOSED_SHARE: f64 = 0.25;
 /// floor's front): a false positive that costs two-sided bins, not light.
 pub fn exposed_backs(patches: &Patches) -> Vec<bool> {
     let twinned = back_to_back_twins(patches);
-    let scene = RayScene::new(patches);
+    let scene = RayScene::new(&patches.corners, &patches.active);
     let active = patches.active_count().max(1);
     let rays = (BACK_RAY_BUDGET / active).clamp(BACK_RAYS_MIN, BACK_RAYS_MAX);
     let side = (rays as f64).sqrt().ceil() as usize;

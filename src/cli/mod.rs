@@ -1,0 +1,7 @@
+//! The command line: arguments, one module per command, the JSON report and the summary text.
+//! A client of the library like any other; built only with the `cli` feature.
+
+pub mod driver;
+pub mod relight;
+pub mod scene;
+pub mod sweep;

@@ -1,0 +1,97 @@
+//! Stage 6: the solvers. Options and presets ([`options`]), the shared iteration steps, the
+//! dense oracle ([`dense`]), the hierarchical solver ([`hierarchical`]), exact direct light
+//! ([`direct`]), relighting ([`relight`]), health checks, the memory budget and what every
+//! solver returns ([`solution`]).
+
+pub mod accelerate;
+pub mod budget;
+pub mod dense;
+pub mod direct;
+pub mod health;
+pub mod hierarchical;
+pub mod memory;
+pub mod options;
+pub mod relight;
+pub mod solution;
+pub mod warnings;
+
+pub use options::*;
+
+use serde::Serialize;
+
+use crate::error::Result;
+use crate::mesh::Patches;
+use crate::progress::Progress;
+use solution::Solution;
+
+/// Which antiradiance solver to run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+#[serde(rename_all = "lowercase")]
+pub enum SolverKind {
+    /// Clustered links, O(n log n) (the default).
+    Hierarchical,
+    /// Every pair of patches (the oracle).
+    Dense,
+}
+
+impl SolverKind {
+    /// The name used on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            SolverKind::Hierarchical => "hierarchical",
+            SolverKind::Dense => "dense",
+        }
+    }
+}
+
+/// A named set of solver parameters (`SolverOptions::preset`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+pub enum Preset {
+    /// 6 x 6 bins, coarse links, looser tolerance.
+    Fast,
+    /// 8 x 8 bins, balanced.
+    Default,
+    /// 12 x 12 bins, fine links, tight tolerance.
+    Accurate,
+}
+
+impl Preset {
+    /// The name `SolverOptions::preset` knows.
+    pub fn name(self) -> &'static str {
+        match self {
+            Preset::Fast => "fast",
+            Preset::Default => "default",
+            Preset::Accurate => "accurate",
+        }
+    }
+}
+
+/// Solves `patches` with the `kind` solver, with exact direct light when
+/// `options.direct_light` is set ([`direct`]). Precondition: `options.validate()` passed.
+///
+/// Errors: [`Error::Memory`] when the solve does not fit `options.memory_limit_bytes` (see
+/// [`crate::solve::budget`]).
+pub fn run(
+    kind: SolverKind,
+    patches: &Patches,
+    options: &SolverOptions,
+    progress: &Progress,
+) -> Result<Solution> {
+    let solution = match (kind, options.direct_light) {
+        (SolverKind::Dense, false) => dense::solve_dense(patches, options, progress),
+        (SolverKind::Hierarchical, false) => {
+            hierarchical::solve_hierarchical(patches, options, progress)
+        }
+        (SolverKind::Dense, true) => direct::solve_dense_direct(patches, options, progress),
+        (SolverKind::Hierarchical, true) => {
+            direct::solve_hierarchical_direct(patches, options, progress)
+        }
+    };
+    let mut solution = solution?;
+    // Degenerate and duplicate triangles' patches get the values the model fixes for them,
+    // whatever the solver left there.
+    solution.settle_inactive(patches);
+    Ok(solution)
+}

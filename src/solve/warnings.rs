@@ -1,0 +1,159 @@
+//! The warnings of a solve: what did not fail but is less accurate than asked.
+
+use crate::mesh::Patches;
+use crate::solve::memory::format_bytes;
+use crate::solve::solution::{self, SolveStats};
+use crate::solve::{budget, direct, SolverKind, SolverOptions};
+
+/// The warnings of one antiradiance solve: memory limit ([`memory_warning`]), iteration cap
+/// ([`cap_warning`]), skipped direct light ([`direct_light_warning`]), capped form-factor rows
+/// ([`capped_rows_warning`]), much negative radiance ([`negative_warning`]) and radiance above
+/// the bound ([`bound_warning`]). A failed solve is not warned about here: it is an error
+/// ([`SolveStats::check`]).
+pub fn solve_warnings(
+    kind: SolverKind,
+    stats: &SolveStats,
+    options: &SolverOptions,
+    patches: &Patches,
+) -> Vec<String> {
+    memory_warning(stats.memory.as_ref())
+        .into_iter()
+        .chain(cap_warning(kind.name(), stats, options, patches))
+        .chain(direct_light_warning(stats, options))
+        .chain(capped_rows_warning(kind.name(), stats))
+        .chain(negative_warning(kind.name(), stats, options))
+        .chain(bound_warning(kind.name(), stats))
+        .collect()
+}
+
+/// The warning for a solve whose largest B is above 1 + [`crate::solve::health::BOUND_WARNING`] times
+/// the bound `E_max / (1 - rho_max)` (but not above 1 + [`crate::solve::health::BOUND_SLACK`], which
+/// fails the solve); `None` otherwise.
+pub fn bound_warning(solver: &str, stats: &SolveStats) -> Option<String> {
+    let ratio = stats.largest_b_over_bound;
+    (stats.failure.is_none() && ratio > 1.0 + crate::solve::health::BOUND_WARNING).then(|| {
+        format!(
+            "the {solver} solver's largest radiance is {ratio:.3} times the bound E_max/(1 - rho_max) = {:.6} the emission and albedos allow: some patches are brighter than the light can make them (cluster links or antiradiance bins too coarse; a smaller --epsilon or more --bins usually lowers it)",
+            stats.radiance_bound
+        )
+    })
+}
+
+/// The warning for a solve that scaled form-factor rows down to 1 (a convex enclosure whose
+/// rows summed above 1 + [`crate::solve::health::ROW_SUM_TOLERANCE`]; `None` when none was).
+pub fn capped_rows_warning(solver: &str, stats: &SolveStats) -> Option<String> {
+    (stats.capped_rows > 0).then(|| {
+        format!(
+            "the {solver} solver scaled {} down to 1: in this convex enclosure their form factors summed to up to {:.6} (more than 1 + {:.0e}, discretization error that 1/(1 - rho) would amplify)",
+            plural(stats.capped_rows, "form-factor row", "form-factor rows"),
+            stats.max_row_sum,
+            crate::solve::health::ROW_SUM_TOLERANCE
+        )
+    })
+}
+
+/// The warning for a solve whose negative radiance mass is above
+/// [`crate::solve::health::NEGATIVE_WARNING`] of the positive (but not above
+/// [`crate::solve::health::NEGATIVE_LIMIT`], which fails the solve); `None` otherwise.
+pub fn negative_warning(
+    solver: &str,
+    stats: &SolveStats,
+    options: &SolverOptions,
+) -> Option<String> {
+    (stats.failure.is_none() && stats.negative_fraction > crate::solve::health::NEGATIVE_WARNING).then(|| {
+        format!(
+            "the {solver} solver's negative radiance is {:.1}% of the positive mass (more than {:.0}%): antiradiance cancelled more light than it should{}; more --bins usually lowers it",
+            100.0 * stats.negative_fraction,
+            100.0 * crate::solve::health::NEGATIVE_WARNING,
+            if options.two_sided {
+                ", which two-sided antiradiance does where surfaces are doubled back to back"
+            } else {
+                ""
+            }
+        )
+    })
+}
+
+/// The warning for a solve that was changed to fit its memory limit (`None` when nothing was):
+/// the limit, what was coarsened, and the estimate of the model solved.
+pub fn memory_warning(memory: Option<&budget::MemoryStats>) -> Option<String> {
+    let m = memory?;
+    if m.coarsened.is_empty() {
+        return None;
+    }
+    Some(format!(
+        "the model was coarsened to fit the memory limit of {} (--memory-limit): {}; its estimate is {} beside the {} in use before the solve; the result is less accurate than asked",
+        format_bytes(m.limit_bytes),
+        m.coarsened.join(", "),
+        format_bytes(m.estimate_bytes),
+        format_bytes(m.base_bytes)
+    ))
+}
+
+/// The warning for a solve that was asked for exact direct light but skipped it because the
+/// scene's emitters were over [`direct::DIRECT_LIGHT_BUDGET`] (`None` otherwise; a direct light
+/// skipped to fit the memory limit is in [`memory_warning`]).
+pub fn direct_light_warning(stats: &SolveStats, options: &SolverOptions) -> Option<String> {
+    let for_memory = stats
+        .memory
+        .as_ref()
+        .is_some_and(|m| m.coarsened.iter().any(|c| c == direct::DIRECT_LIGHT_OFF));
+    (options.direct_light && stats.direct_light_skipped && !for_memory).then(|| {
+        format!(
+            "exact direct light skipped: receivers x emitter groups is over {:.0e} or the shadow rays over {:.0e}; antiradiance carried every bounce (--no-direct-light silences this)",
+            direct::DIRECT_LIGHT_BUDGET as f64,
+            direct::MAX_SHADOW_RAYS as f64
+        )
+    })
+}
+
+/// The warning for a solve that stopped at the iteration cap (`None` when it converged or
+/// diverged): the
+/// solver, the iterations, the last residual against the tolerance and, since the residual
+/// underestimates the remaining error when the iteration contracts slowly, an estimate of that
+/// error and of the iterations still needed, taking the contraction per sweep to be the highest
+/// albedo of the scene (exact for a closed box of one albedo, an upper bound otherwise).
+pub fn cap_warning(
+    solver: &str,
+    stats: &SolveStats,
+    options: &SolverOptions,
+    patches: &Patches,
+) -> Option<String> {
+    if stats.converged || stats.failure.is_some() {
+        return None;
+    }
+    let rho = (0..patches.len())
+        .filter(|&p| patches.active[p])
+        .flat_map(|p| patches.albedo[p])
+        .fold(0.0f64, f64::max)
+        .min(0.9999);
+    let r = solution::sanitize(stats.residual);
+    let mut text = format!(
+        "the {solver} solver stopped at the iteration cap ({} iterations) without converging: last residual {r:.2e}, tolerance {:.1e}; the result is not the converged solution",
+        stats.iterations, options.tol
+    );
+    if rho > 0.0 && r > 0.0 {
+        let remaining = r * rho / (1.0 - rho);
+        let more = ((options.tol * (1.0 - rho) / (r * rho)).ln() / rho.ln()).ceil();
+        text += &format!(
+            " (its remaining error may be as large as {:.2}% of B: residual x rho/(1 - rho) with the highest albedo rho = {rho})",
+            100.0 * remaining
+        );
+        if more.is_finite() && more > 0.0 {
+            text += &format!(
+                "; raise --max-iterations (to about {} at this rate)",
+                stats.iterations as f64 + more
+            );
+        } else {
+            text += "; raise --max-iterations or --tol";
+        }
+    } else {
+        text += "; raise --max-iterations or --tol";
+    }
+    Some(text)
+}
+
+/// `n` and the noun in singular or plural (`plural(2, "row", "rows")`).
+fn plural(n: usize, one: &str, many: &str) -> String {
+    format!("{n} {}", if n == 1 { one } else { many })
+}
