@@ -19,8 +19,10 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod error;
+pub mod files;
 pub mod geometry;
 pub mod hierarchy;
+pub mod memory;
 pub mod mesh;
 pub mod output;
 pub mod progress;

@@ -25,6 +25,8 @@ use serde::Serialize;
 use serde_json::{json, Map, Value};
 
 use antiradiance::error::{Error, Result};
+use antiradiance::memory;
+use antiradiance::memory::format_bytes;
 use antiradiance::mesh::{self, Patches};
 use antiradiance::mesh::{patch_count, MAX_PATCHES};
 use antiradiance::output;
@@ -32,10 +34,9 @@ use antiradiance::output::render::{self, CameraOptions, Shading};
 use antiradiance::progress::Progress;
 use antiradiance::reference::{self, ReferenceOptions};
 use antiradiance::scene::{self, Scene, SceneOptions};
-use antiradiance::solve::memory::format_bytes;
+use antiradiance::solve::budget;
 use antiradiance::solve::solution::{self, Solution, SolveStats};
 use antiradiance::solve::warnings::solve_warnings;
-use antiradiance::solve::{budget, memory};
 use antiradiance::solve::{Preset, SolverKind, SolverOptions};
 
 // ---------------------------------------------------------------------------------------------

@@ -2,9 +2,9 @@
 
 use crate::cli::driver::{self, Report, SceneArgs, SolverArgs, Timings};
 use antiradiance::error::{Error, Result};
+use antiradiance::memory;
 use antiradiance::output::render::{self, CameraOptions, Shading};
 use antiradiance::progress::Progress;
-use antiradiance::solve::memory;
 use antiradiance::solve::relight::{emitter_centroids, frame_path, sweep_weights, Relighter};
 use antiradiance::solve::solution::sanitize;
 use clap::Args;

@@ -796,7 +796,7 @@ fn table(solver: SolverKind, results: &[RunResult]) -> String {
             },
             r.links,
             r.peak_memory_delta_bytes
-                .map(antiradiance::solve::memory::format_bytes)
+                .map(antiradiance::memory::format_bytes)
                 .unwrap_or_else(|| "n/a".into()),
             100.0 * r.error,
             if r.pareto { "  *" } else { "" }

@@ -5,8 +5,8 @@
 use rayon::prelude::*;
 
 use crate::geometry::bins::Bins;
+use crate::hierarchy::cost::{self as budget, LinkBudget, Meter, ModelCounts, OverBudget};
 use crate::hierarchy::ClusterTree;
-use crate::solve::budget::{self, LinkBudget, Meter, ModelCounts, OverBudget};
 use crate::transport::{couple, Coupling, CouplingParams, Entry, PatchGeom, Receiver};
 
 /// Parameters of link refinement.
@@ -46,6 +46,9 @@ impl Default for LinkParams {
         }
     }
 }
+
+// The memory estimate of the links counts this size.
+const _: () = assert!(std::mem::size_of::<ClusterLink>() as u64 == budget::CLUSTER_LINK_BYTES);
 
 /// A cluster link: sender node S sends to receiver node R as one exchange along `w`.
 #[derive(Clone, Copy, Debug)]

@@ -133,10 +133,7 @@ impl Patches {
     }
 }
 
-/// Largest number of patches a `max_edge` may split a scene into (a guard against a typo such
-/// as a length in the wrong unit, which would otherwise exhaust memory before any message; a
-/// scene that has more triangles than this to begin with is not refused).
-pub const MAX_PATCHES: u64 = 1 << 22;
+pub use crate::scene::MAX_PATCHES;
 
 /// The split of one input triangle (world corners): [`build_patches`] cuts it into k*k pieces,
 /// k = ceil(longest edge / max_edge) in 1..=1024; 1 for a degenerate triangle and for a

@@ -41,8 +41,8 @@ use std::path::Path;
 use glam::DVec3;
 
 use crate::error::{Error, Result};
+use crate::files::write_atomic;
 use crate::mesh::Patches;
-use crate::output::write_atomic;
 use crate::solve::solution::{sanitize, Solution};
 
 /// The colour (sRGB, 8 bit) of every pixel where the back side of a triangle is seen.

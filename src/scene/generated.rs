@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 use glam::DVec3;
 
 use crate::error::{Error, Result};
-use crate::output::write_atomic;
+use crate::files::write_atomic;
 use crate::scene::Scene;
 
 /// Cornell box white reflectance (floor, ceiling, back wall, blocks), RGB.

@@ -16,6 +16,11 @@ use glam::DVec3;
 
 use crate::error::{Error, Result};
 
+/// Largest number of patches a `max_edge` may split a scene into (and most triangles a generated scene may have) (a guard against a typo such
+/// as a length in the wrong unit, which would otherwise exhaust memory before any message; a
+/// scene that has more triangles than this to begin with is not refused).
+pub const MAX_PATCHES: u64 = 1 << 22;
+
 /// Options that complete or override what the scene files say about materials.
 #[derive(Clone, Debug)]
 pub struct SceneOptions {

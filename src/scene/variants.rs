@@ -28,10 +28,10 @@ use std::path::{Path, PathBuf};
 use glam::{DVec2, DVec3};
 
 use crate::error::{Error, Result};
+use crate::files::{format_f64, write_atomic};
 use crate::geometry::sampling::{mix64, Rng};
-use crate::mesh::MAX_PATCHES;
-use crate::output::{format_f64, write_atomic};
 use crate::scene::Scene;
+use crate::scene::MAX_PATCHES;
 
 /// The kinds of bad triangulation [`make_variant`] makes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]

@@ -263,7 +263,7 @@ pub fn solve_dense(
         limit_bytes: budget.limit,
         base_bytes: budget.base,
         estimate_bytes: estimate + near_bytes,
-        peak_bytes: crate::solve::memory::peak_rss_bytes(),
+        peak_bytes: crate::memory::peak_rss_bytes(),
         coarsened: Vec::new(),
         attempts: 0,
         epsilon: 0.0,

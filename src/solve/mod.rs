@@ -9,7 +9,6 @@ pub mod dense;
 pub mod direct;
 pub mod health;
 pub mod hierarchical;
-pub mod memory;
 pub mod options;
 pub mod relight;
 pub mod solution;

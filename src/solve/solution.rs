@@ -2,6 +2,7 @@
 
 use serde::Serialize;
 
+pub use crate::geometry::sanitize;
 use crate::mesh::Patches;
 
 /// Convergence and health figures of one solve.
@@ -53,10 +54,10 @@ pub struct SolveStats {
     pub extrapolations: usize,
     /// What the hierarchical solver modelled (channels, antiradiance, stored bins) and what that
     /// saved; `None` for the dense solver and the path tracer.
-    pub model: Option<crate::solve::hierarchical::model::ModelStats>,
+    pub model: Option<ModelStats>,
     /// Seconds per stage of the hierarchical solver (tree, links, model, iterate); `None` for
     /// the dense solver and the path tracer.
-    pub stage_seconds: Option<crate::solve::hierarchical::HierarchyTimings>,
+    pub stage_seconds: Option<HierarchyTimings>,
     /// True when exact direct light was asked for but skipped: the scene's emitters would cost
     /// more than [`crate::solve::direct::DIRECT_LIGHT_BUDGET`] unoccluded form factors.
     pub direct_light_skipped: bool,
@@ -81,6 +82,43 @@ pub struct LinkReport {
     pub exact_links: u64,
     /// Counts and times of the refinement.
     pub refinement: crate::hierarchy::links::LinkStats,
+}
+
+/// Time spent in each stage of a hierarchical solve, seconds.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct HierarchyTimings {
+    /// Cluster tree (median splits and our arrays).
+    pub tree: f64,
+    /// Link refinement including exact couplings.
+    pub links: f64,
+    /// Deciding what to model: grey and convexity tests, the bins each element stores.
+    pub model: f64,
+    /// All iterations.
+    pub iterate: f64,
+    /// Exact direct light (shadow-ray BVH, unoccluded form factors, shadow rays); 0 when off.
+    pub direct: f64,
+}
+
+/// What the hierarchical solver modelled for one solve, and what it saved.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct ModelStats {
+    /// Colour channels solved: 1 for a grey scene, 3 otherwise.
+    pub channels: usize,
+    /// True when antiradiance was propagated (false for a convex enclosure, or when switched off).
+    pub antiradiance: bool,
+    /// True when the scene is a convex enclosure: all elements see each other unoccluded.
+    pub convex_enclosure: bool,
+    /// Input patches whose back is exposed to light and blocks it ([`exposed_backs`]; all of
+    /// them with `two_sided`, none with `block_exposed_backs` off).
+    pub back_blocking_patches: u64,
+    /// Antiradiance values stored per sweep state: (element, bin) slots that some link both
+    /// writes and reads.
+    pub anti_bins_stored: u64,
+    /// Slots a solver storing every bin of every element would hold (elements x bins).
+    pub anti_bins_full: u64,
+    /// Bytes of per-sweep state (two copies of radiance and antiradiance) saved against three
+    /// channels and every bin.
+    pub bytes_saved: u64,
 }
 
 /// A solved scene.
@@ -150,15 +188,6 @@ impl Solution {
                 self.patch_radiance[p] = self.triangle_radiance[t];
             }
         }
-    }
-}
-
-/// Replaces a non-finite value by 0 so that no NaN or infinity ever reaches an output.
-pub fn sanitize(x: f64) -> f64 {
-    if x.is_finite() {
-        x
-    } else {
-        0.0
     }
 }
 

@@ -1,7 +1,7 @@
 //! The warnings of a solve: what did not fail but is less accurate than asked.
 
+use crate::memory::format_bytes;
 use crate::mesh::Patches;
-use crate::solve::memory::format_bytes;
 use crate::solve::solution::{self, SolveStats};
 use crate::solve::{budget, direct, SolverKind, SolverOptions};
 

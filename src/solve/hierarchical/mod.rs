@@ -28,25 +28,11 @@ use crate::solve::budget::{
     self, Budget, HierarchicalCosts, LinkBudget, MemoryStats, ModelCounts, OverBudget,
 };
 use crate::solve::health::{self, Guard};
+pub use crate::solve::solution::HierarchyTimings;
 use crate::solve::solution::{Solution, SolveStats};
 use crate::solve::{change_ratio, finish, Convergence, SolverOptions};
 use crate::transport::gather_entries;
 use model::ModelStats;
-
-/// Time spent in each stage of a hierarchical solve, seconds.
-#[derive(Clone, Debug, Default, serde::Serialize)]
-pub struct HierarchyTimings {
-    /// Cluster tree (median splits and our arrays).
-    pub tree: f64,
-    /// Link refinement including exact couplings.
-    pub links: f64,
-    /// Deciding what to model: grey and convexity tests, the bins each element stores.
-    pub model: f64,
-    /// All iterations.
-    pub iterate: f64,
-    /// Exact direct light (shadow-ray BVH, unoccluded form factors, shadow rays); 0 when off.
-    pub direct: f64,
-}
 
 /// A scene prepared for hierarchical solving: tree, links and element arrays. Build it once and
 /// solve it as many times as needed (different emission: see [`Prepared::solve_with_emission`]).
@@ -801,7 +787,7 @@ impl Prepared {
             refinement: self.links.stats.clone(),
         });
         stats.elements = n;
-        memory.peak_bytes = crate::solve::memory::peak_rss_bytes();
+        memory.peak_bytes = crate::memory::peak_rss_bytes();
         stats.memory = Some(memory);
         // The result is checked against the bound of this solve's source (with exact direct
         // light, the reflected direct light: a tighter bound than the emission's).

@@ -14,34 +14,12 @@
 
 use glam::DVec3;
 use rayon::prelude::*;
-use serde::Serialize;
 
 use crate::geometry::raytrace::RayScene;
 use crate::geometry::sampling::{cosine_direction, point_on_triangle, Rng};
 use crate::hierarchy::ClusterTree;
 use crate::mesh::Patches;
-
-/// What the hierarchical solver modelled for one solve, and what it saved.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
-pub struct ModelStats {
-    /// Colour channels solved: 1 for a grey scene, 3 otherwise.
-    pub channels: usize,
-    /// True when antiradiance was propagated (false for a convex enclosure, or when switched off).
-    pub antiradiance: bool,
-    /// True when the scene is a convex enclosure: all elements see each other unoccluded.
-    pub convex_enclosure: bool,
-    /// Input patches whose back is exposed to light and blocks it ([`exposed_backs`]; all of
-    /// them with `two_sided`, none with `block_exposed_backs` off).
-    pub back_blocking_patches: u64,
-    /// Antiradiance values stored per sweep state: (element, bin) slots that some link both
-    /// writes and reads.
-    pub anti_bins_stored: u64,
-    /// Slots a solver storing every bin of every element would hold (elements x bins).
-    pub anti_bins_full: u64,
-    /// Bytes of per-sweep state (two copies of radiance and antiradiance) saved against three
-    /// channels and every bin.
-    pub bytes_saved: u64,
-}
+pub use crate::solve::solution::ModelStats;
 
 /// Shadow-ray budget of [`exposed_backs`]: rays per patch are this over the patch count,
 /// between [`BACK_RAYS_MIN`] and [`BACK_RAYS_MAX`].

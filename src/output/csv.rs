@@ -1,0 +1,133 @@
+//! The per-triangle CSV (`index,area,emissive,r,g,b`): writing and reading it back.
+
+use std::io::Write;
+use std::path::Path;
+
+use crate::error::{Error, Result};
+use crate::files::{format_f64, write_atomic};
+use crate::scene::Scene;
+use crate::solve::solution::Solution;
+
+/// The exact header line of the per-triangle CSV (without the line break).
+pub const TRIANGLES_CSV_HEADER: &str = "index,area,emissive,r,g,b";
+
+/// Writes the per-input-triangle results as CSV with the header `index,area,emissive,r,g,b`.
+///
+/// One row per input triangle of `scene`, in input order: index (0-based), area in the scene's
+/// units squared, 1 if the triangle emits else 0, then the outgoing radiance B (RGB,
+/// W / (m^2 sr), `solution.triangle_radiance`). Floats are written at full precision (they
+/// round-trip through [`read_triangles_csv`]); a non-finite value is written as 0.
+/// Precondition: `solution.triangle_radiance.len() == scene.len()` (an error otherwise).
+pub fn write_triangles_csv(path: &Path, scene: &Scene, solution: &Solution) -> Result<()> {
+    if solution.triangle_radiance.len() != scene.len() {
+        return Err(Error::Parameter(format!(
+            "{}: solution has {} triangle values but the scene has {} triangles",
+            path.display(),
+            solution.triangle_radiance.len(),
+            scene.len()
+        )));
+    }
+    write_atomic(path, |w| {
+        writeln!(w, "{TRIANGLES_CSV_HEADER}")?;
+        for (t, b) in solution.triangle_radiance.iter().enumerate() {
+            writeln!(
+                w,
+                "{},{},{},{},{},{}",
+                t,
+                format_f64(scene.area(t)),
+                u8::from(scene.is_emitter(t)),
+                format_f64(b[0]),
+                format_f64(b[1]),
+                format_f64(b[2])
+            )?;
+        }
+        Ok(())
+    })
+}
+
+/// Reads the per-triangle radiance (r, g, b columns) back from a CSV written by
+/// [`write_triangles_csv`], in row order.
+///
+/// The header must contain the columns `index`, `r`, `g` and `b` (extra columns are ignored);
+/// rows must have every column, the index must count 0, 1, 2, ... and r, g, b must be finite
+/// numbers. Blank lines are skipped. Errors are one line naming the file and, for a bad row,
+/// the 1-based line (`file:line: message`).
+pub fn read_triangles_csv(path: &Path) -> Result<Vec<[f64; 3]>> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let parse_err = |line: usize, message: String| Error::Parse {
+        path: path.to_path_buf(),
+        line,
+        message,
+    };
+    let mut lines = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| (i + 1, l.trim()))
+        .filter(|(_, l)| !l.is_empty());
+    let Some((header_line, header)) = lines.next() else {
+        return Err(Error::Scene {
+            path: path.to_path_buf(),
+            message: format!("empty file, expected the header '{TRIANGLES_CSV_HEADER}'"),
+        });
+    };
+    let columns: Vec<&str> = header.split(',').map(str::trim).collect();
+    let find = |name: &str| {
+        columns.iter().position(|c| *c == name).ok_or_else(|| {
+            parse_err(
+                header_line,
+                format!("header has no '{name}' column (expected '{TRIANGLES_CSV_HEADER}')"),
+            )
+        })
+    };
+    let index_col = find("index")?;
+    let rgb_cols = [find("r")?, find("g")?, find("b")?];
+
+    let mut values = Vec::new();
+    for (line_no, line) in lines {
+        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+        if fields.len() != columns.len() {
+            return Err(parse_err(
+                line_no,
+                format!(
+                    "expected {} comma-separated fields, found {}",
+                    columns.len(),
+                    fields.len()
+                ),
+            ));
+        }
+        let index: usize = fields[index_col].parse().map_err(|_| {
+            parse_err(
+                line_no,
+                format!("malformed triangle index '{}'", fields[index_col]),
+            )
+        })?;
+        if index != values.len() {
+            return Err(parse_err(
+                line_no,
+                format!(
+                    "triangle index {index} out of order, expected {}",
+                    values.len()
+                ),
+            ));
+        }
+        let mut rgb = [0.0; 3];
+        for (k, &col) in rgb_cols.iter().enumerate() {
+            let field = fields[col];
+            let x: f64 = field.parse().map_err(|_| {
+                parse_err(
+                    line_no,
+                    format!("malformed number '{field}' in column {}", columns[col]),
+                )
+            })?;
+            if !x.is_finite() {
+                return Err(parse_err(
+                    line_no,
+                    format!("value '{field}' in column {} is not finite", columns[col]),
+                ));
+            }
+            rgb[k] = x;
+        }
+        values.push(rgb);
+    }
+    Ok(values)
+}
