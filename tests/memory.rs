@@ -202,7 +202,7 @@ fn memory_limit_sizes_are_checked() {
     }
     // The library refuses a zero limit.
     let options = SolverOptions {
-        memory_limit_bytes: 0,
+        memory_limit_bytes: Some(0),
         ..SolverOptions::default()
     };
     assert!(options.validate().is_err());
@@ -273,7 +273,7 @@ fn the_report_has_the_mesh_fields() {
 fn the_library_respects_the_limit() {
     let patches = build_patches(&generated::cornell_box(), Some(100.0));
     let tiny = SolverOptions {
-        memory_limit_bytes: 1 << 20,
+        memory_limit_bytes: Some(1 << 20),
         ..SolverOptions::default()
     };
     match solve_dense(&patches, &tiny, &Progress::hidden()) {

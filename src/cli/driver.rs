@@ -175,7 +175,7 @@ pub fn parse_memory_limit(text: &str) -> std::result::Result<u64, String> {
 impl SolverArgs {
     /// The preset with the explicit overrides applied, validated.
     pub fn options(&self) -> Result<SolverOptions> {
-        let mut options = SolverOptions::preset(self.preset.unwrap_or(Preset::Default).name())?;
+        let mut options = self.preset.unwrap_or(Preset::Default).options();
         if let Some(bins) = self.bins {
             options.bins = bins;
         }
@@ -202,7 +202,7 @@ impl SolverArgs {
             options.direct_light = false;
         }
         if let Some(limit) = self.memory_limit {
-            options.memory_limit_bytes = limit;
+            options.memory_limit_bytes = Some(limit);
         }
         options.validate()?;
         Ok(options)

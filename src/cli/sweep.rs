@@ -248,12 +248,7 @@ fn parse_switch(item: &str) -> std::result::Result<bool, String> {
 }
 
 fn parse_preset(item: &str) -> std::result::Result<Preset, String> {
-    match item.to_ascii_lowercase().as_str() {
-        "fast" => Ok(Preset::Fast),
-        "default" => Ok(Preset::Default),
-        "accurate" => Ok(Preset::Accurate),
-        _ => Err("expected fast, default or accurate".to_string()),
-    }
+    Preset::from_name(item).ok_or_else(|| "expected fast, default or accurate".to_string())
 }
 
 /// One point of the grid: the preset it starts from and the complete, validated options.
@@ -308,7 +303,7 @@ impl SweepArgs {
         }
         let mut runs: Vec<RunSpec> = Vec::with_capacity(count);
         for preset in presets.iter().map(|p| p.resolve(Preset::Default)) {
-            let base = SolverOptions::preset(preset.name())?;
+            let base = preset.options();
             for d in &direct {
                 let direct_light = d.resolve(base.direct_light);
                 for b in &bins {
@@ -326,7 +321,7 @@ impl SweepArgs {
                                     options.split_depth = depth;
                                 }
                                 if let Some(limit) = self.memory_limit {
-                                    options.memory_limit_bytes = limit;
+                                    options.memory_limit_bytes = Some(limit);
                                 }
                                 options.validate()?;
                                 let run = RunSpec { preset, options };

@@ -13,7 +13,7 @@ use crate::transport::{couple, Coupling, CouplingParams, Entry, PatchGeom, Recei
 #[derive(Clone, Copy, Debug)]
 pub struct LinkParams {
     /// Largest solid angle either end of a cluster link may subtend from the other, as a
-    /// fraction of the mean bin solid angle. Smaller: more, finer links. 0.1..2; 0.5 by default.
+    /// fraction of the mean bin solid angle. Smaller: more, finer links. 0.25..2; 1 by default.
     /// 0 forces every link down to element pairs (the dense solver's couplings).
     pub epsilon: f64,
     /// Smallest bounding-sphere radius (unit frame: scene diameter 1) a triangle is split down
@@ -35,15 +35,22 @@ pub struct LinkParams {
     pub leaf_gap: f64,
 }
 
+impl LinkParams {
+    /// The defaults, which are also the `default` solver preset's
+    /// ([`crate::solve::SolverOptions::default_preset`] takes `epsilon` and `max_split_depth`
+    /// from here).
+    pub const DEFAULT: LinkParams = LinkParams {
+        epsilon: 1.0,
+        min_radius: 0.02,
+        max_split_depth: 4,
+        receiver_factor: 4.0,
+        leaf_gap: 1.0,
+    };
+}
+
 impl Default for LinkParams {
     fn default() -> Self {
-        LinkParams {
-            epsilon: 0.5,
-            min_radius: 0.02,
-            max_split_depth: 4,
-            receiver_factor: 4.0,
-            leaf_gap: 1.0,
-        }
+        LinkParams::DEFAULT
     }
 }
 

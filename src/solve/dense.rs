@@ -50,7 +50,7 @@ pub fn solve_dense(
     let n = patches.len();
     let params = options.coupling();
     let back = crate::solve::hierarchical::model::back_blocking(patches, options);
-    let budget = Budget::start(options.memory_limit_bytes);
+    let budget = Budget::start(options.memory_limit());
     let estimate = budget::dense_bytes(n as u64, options.bins, options.near_quadrature);
     let refuse = |bytes: u64| {
         budget.does_not_fit(

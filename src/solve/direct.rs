@@ -1112,7 +1112,7 @@ pub fn solve_dense_direct(
     progress: &Progress,
 ) -> Result<Solution> {
     let receivers = patch_receivers(patches);
-    let budget = Budget::start(options.memory_limit_bytes);
+    let budget = Budget::start(options.memory_limit());
     // The dense solve, and the copy of the patches that carries its source.
     let dense_bytes =
         budget::dense_bytes(patches.len() as u64, options.bins, options.near_quadrature)

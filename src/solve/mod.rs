@@ -57,7 +57,26 @@ pub enum Preset {
 }
 
 impl Preset {
-    /// The name `SolverOptions::preset` knows.
+    /// Every preset, fastest first.
+    pub const ALL: [Preset; 3] = [Preset::Fast, Preset::Default, Preset::Accurate];
+
+    /// The preset's options.
+    pub const fn options(self) -> SolverOptions {
+        match self {
+            Preset::Fast => SolverOptions::fast(),
+            Preset::Default => SolverOptions::default_preset(),
+            Preset::Accurate => SolverOptions::accurate(),
+        }
+    }
+
+    /// The preset named `name` (`fast`, `default`, `accurate`, any case), if any.
+    pub fn from_name(name: &str) -> Option<Preset> {
+        Preset::ALL
+            .into_iter()
+            .find(|p| p.name().eq_ignore_ascii_case(name))
+    }
+
+    /// The preset's name.
     pub fn name(self) -> &'static str {
         match self {
             Preset::Fast => "fast",

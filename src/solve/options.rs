@@ -4,9 +4,11 @@
 use serde::Serialize;
 
 use crate::error::{Error, Result};
+use crate::hierarchy::links::LinkParams;
 use crate::mesh::Patches;
 use crate::solve::health::{self, FailureKind, SolveFailure};
 use crate::solve::solution::{sanitize, Solution, SolveStats};
+use crate::solve::Preset;
 use crate::transport::CouplingParams;
 
 /// Parameters of an antiradiance solve.
@@ -68,9 +70,10 @@ pub struct SolverOptions {
     /// [`crate::solve::budget::coarser`]), the exact direct light is skipped when it
     /// does not fit, and a solve that cannot fit even so (or a dense solve that does not fit)
     /// ends with [`Error::Memory`] before allocating; each change is reported. At least 1;
-    /// by default half the machine's physical memory ([`crate::solve::budget::default_memory_limit`]:
-    /// `MemTotal` of `/proc/meminfo`, 4 GiB where that is unknown).
-    pub memory_limit_bytes: u64,
+    /// `None` (the default) is half the machine's physical memory
+    /// ([`crate::memory::default_memory_limit`]: `MemTotal` of `/proc/meminfo`, 4 GiB where that
+    /// is unknown), read when the solve starts ([`Self::memory_limit`]).
+    pub memory_limit_bytes: Option<u64>,
 }
 
 impl Default for SolverOptions {
@@ -80,40 +83,41 @@ impl Default for SolverOptions {
 }
 
 impl SolverOptions {
-    /// Balanced speed and accuracy: 8 x 8 bins, epsilon 1 (the default).
-    pub fn default_preset() -> Self {
+    /// Balanced speed and accuracy: 8 x 8 bins, epsilon 1 (the default). The link and coupling
+    /// knobs are those components' own defaults ([`LinkParams::DEFAULT`],
+    /// [`CouplingParams::DEFAULT`]), so a component built on its own behaves as in this preset.
+    pub const fn default_preset() -> Self {
         SolverOptions {
             bins: 8,
             tol: 1e-3,
             max_iterations: 500,
-            two_sided: false,
+            two_sided: CouplingParams::DEFAULT.two_sided,
             block_exposed_backs: true,
             antiradiance: true,
             clamp_negative: true,
-            near_quadrature: 4,
-            epsilon: 1.0,
-            split_depth: 4,
+            near_quadrature: CouplingParams::DEFAULT.near_quadrature,
+            epsilon: LinkParams::DEFAULT.epsilon,
+            split_depth: LinkParams::DEFAULT.max_split_depth,
             direct_light: true,
             pair_cache_mb: 1024,
             acceleration_depth: 4,
-            memory_limit_bytes: crate::solve::budget::default_memory_limit(),
+            memory_limit_bytes: None,
         }
     }
 
-    /// Fastest: 6 x 6 bins, epsilon 2, looser tolerance.
-    pub fn fast() -> Self {
+    /// Fastest: 6 x 6 bins, epsilon 2, looser tolerance, no exact direct light.
+    pub const fn fast() -> Self {
         SolverOptions {
             bins: 6,
             tol: 3e-3,
             epsilon: 2.0,
-            near_quadrature: 4,
             direct_light: false,
             ..SolverOptions::default_preset()
         }
     }
 
-    /// Most accurate: 12 x 12 bins, epsilon 0.25, tight tolerance.
-    pub fn accurate() -> Self {
+    /// Most accurate: 12 x 12 bins, epsilon 0.25, tight tolerance, finer near quadrature.
+    pub const fn accurate() -> Self {
         SolverOptions {
             bins: 12,
             tol: 3e-4,
@@ -123,16 +127,20 @@ impl SolverOptions {
         }
     }
 
-    /// A preset by name: `fast`, `default` or `accurate`.
+    /// A preset by name: `fast`, `default` or `accurate` ([`Preset::from_name`]).
     pub fn preset(name: &str) -> Result<Self> {
-        match name {
-            "fast" => Ok(Self::fast()),
-            "default" => Ok(Self::default_preset()),
-            "accurate" => Ok(Self::accurate()),
-            other => Err(Error::Parameter(format!(
-                "unknown preset '{other}' (expected fast, default or accurate)"
-            ))),
-        }
+        Preset::from_name(name).map(Preset::options).ok_or_else(|| {
+            Error::Parameter(format!(
+                "unknown preset '{name}' (expected fast, default or accurate)"
+            ))
+        })
+    }
+
+    /// The memory limit of a solve, bytes: [`Self::memory_limit_bytes`], or half the
+    /// machine's physical memory when that is `None` ([`crate::memory::default_memory_limit`]).
+    pub fn memory_limit(&self) -> u64 {
+        self.memory_limit_bytes
+            .unwrap_or_else(crate::memory::default_memory_limit)
     }
 
     /// Checks every field's range.
@@ -166,7 +174,7 @@ impl SolverOptions {
                 self.epsilon
             )));
         }
-        if self.memory_limit_bytes == 0 {
+        if self.memory_limit_bytes == Some(0) {
             return Err(Error::Parameter(
                 "--memory-limit must be at least 1 byte".into(),
             ));

@@ -17,12 +17,12 @@
 //! # Example
 //!
 //! ```
-//! use antiradiance::relight::Relighter;
-//! use antiradiance::scenes;
+//! use antiradiance::scene::generated;
+//! use antiradiance::solve::relight::Relighter;
 //! use antiradiance::solve::SolverOptions;
 //!
 //! # fn main() -> antiradiance::Result<()> {
-//! let scene = scenes::cornell_box();
+//! let scene = generated::cornell_box();
 //! // Tree and links are built here, once.
 //! let mut relighter = Relighter::new(&scene, None, &SolverOptions::fast())?;
 //!

@@ -53,13 +53,20 @@ pub struct CouplingParams {
     pub piece_fraction: f64,
 }
 
+impl CouplingParams {
+    /// The defaults, which are also the `default` solver preset's
+    /// ([`crate::solve::SolverOptions::default_preset`] takes `two_sided` and
+    /// `near_quadrature` from here).
+    pub const DEFAULT: CouplingParams = CouplingParams {
+        two_sided: false,
+        near_quadrature: 4,
+        piece_fraction: 0.5,
+    };
+}
+
 impl Default for CouplingParams {
     fn default() -> Self {
-        CouplingParams {
-            two_sided: false,
-            near_quadrature: 6,
-            piece_fraction: 0.5,
-        }
+        CouplingParams::DEFAULT
     }
 }
 

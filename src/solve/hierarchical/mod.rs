@@ -167,7 +167,7 @@ impl Prepared {
         options: &SolverOptions,
         record_culled: bool,
     ) -> Result<Prepared> {
-        let budget = Budget::start(options.memory_limit_bytes);
+        let budget = Budget::start(options.memory_limit());
         let tree_bytes = HierarchicalCosts::tree_bytes(patches.len() as u64);
         if !budget.fits(tree_bytes) {
             return Err(budget.does_not_fit(
