@@ -449,3 +449,38 @@ fn generators_are_deterministic() {
         read(&b).replace("b.mtl", "x")
     );
 }
+
+/// The shipped Cornell box carries its published camera, which a picture uses by default; a
+/// malformed camera line is a warning and the scene still loads.
+#[test]
+fn the_cornell_box_file_carries_its_published_camera() {
+    use antiradiance::scene::generated::CORNELL_BOX_CAMERA;
+    let scene = load_obj(
+        &scenes_dir().join("cornell_box.obj"),
+        &SceneOptions::default(),
+    )
+    .unwrap();
+    assert_eq!(scene.camera, Some(CORNELL_BOX_CAMERA));
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+
+    let dir = tempfile::tempdir().unwrap();
+    let obj = dir.path().join("t.obj");
+    for bad in [
+        "# camera eye 0 0 1 target 0 0 1 fov 40",
+        "# camera eye 0 0 1 target 0 0 0 fov 180",
+        "# camera eye 0 0 nan target 0 0 0 fov 40",
+        "# camera eye 0 0 1 target 0 0 0",
+    ] {
+        std::fs::write(&obj, format!("{bad}\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")).unwrap();
+        let scene = load_obj(&obj, &SceneOptions::default()).unwrap();
+        assert_eq!(scene.camera, None, "{bad}");
+        assert!(
+            scene
+                .warnings
+                .iter()
+                .any(|w| w.contains("t.obj:1:") && w.contains("camera")),
+            "{bad}: {:?}",
+            scene.warnings
+        );
+    }
+}

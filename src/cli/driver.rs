@@ -237,14 +237,9 @@ pub struct OutputArgs {
     /// Point the camera looks at, in scene units.
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_point, allow_hyphen_values = true)]
     pub target: Option<DVec3>,
-    /// Vertical field of view of the picture, degrees.
-    #[arg(
-        long,
-        value_name = "DEG",
-        default_value_t = 50.0,
-        allow_negative_numbers = true
-    )]
-    pub fov: f64,
+    /// Vertical field of view of the picture, degrees [default: the scene's camera's, else 50].
+    #[arg(long, value_name = "DEG", allow_negative_numbers = true)]
+    pub fov: Option<f64>,
     /// Picture width in pixels.
     #[arg(long, value_name = "W", default_value_t = 800)]
     pub width: u32,
@@ -262,16 +257,29 @@ pub struct OutputArgs {
 }
 
 impl OutputArgs {
-    /// The camera of the picture.
+    /// The camera of the picture as given on the command line.
     pub fn camera(&self) -> CameraOptions {
         CameraOptions {
             eye: self.eye,
             target: self.target,
-            fov_deg: self.fov,
+            fov_deg: self.fov.unwrap_or(CameraOptions::default().fov_deg),
             width: self.width,
             height: self.height,
             exposure: self.exposure,
         }
+    }
+
+    /// The camera of the picture of `scene`: the scene's own camera ([`Scene::camera`]) where
+    /// neither `--eye` nor `--target` is given (its field of view unless `--fov` is), else
+    /// [`OutputArgs::camera`].
+    pub fn camera_for(&self, scene: &Scene) -> CameraOptions {
+        let mut camera = self.camera();
+        if let (None, None, Some(c)) = (self.eye, self.target, scene.camera) {
+            camera.eye = Some(c.eye);
+            camera.target = Some(c.target);
+            camera.fov_deg = self.fov.unwrap_or(c.fov_deg);
+        }
+        camera
     }
 
     /// The output files, with the flag that names each (report last).
@@ -546,7 +554,7 @@ pub fn run_reference(patches: &Patches, options: &ReferenceOptions, quiet: bool)
 /// Stage 5 without the report: picture, PLY, CSV (each atomic). Preconditions:
 /// `output.validate()` passed and `solution` belongs to `loaded`.
 pub fn write_outputs(output: &OutputArgs, loaded: &Loaded, solution: &Solution) -> Result<()> {
-    let camera = output.camera();
+    let camera = output.camera_for(&loaded.scene);
     if let Some(path) = &output.png {
         let shading = if output.smooth {
             Shading::Smooth

@@ -20,7 +20,7 @@ use glam::DVec3;
 
 use crate::error::{Error, Result};
 use crate::files::write_atomic;
-use crate::scene::Scene;
+use crate::scene::{Scene, SceneCamera};
 
 /// Cornell box white reflectance (floor, ceiling, back wall, blocks), RGB.
 pub const CORNELL_WHITE: [f64; 3] = [0.725, 0.71, 0.68];
@@ -289,8 +289,18 @@ pub fn cornell_box() -> Scene {
     ];
     block(&mut b, tall_top, [(0, 3), (3, 2), (2, 1), (1, 0)], white);
 
-    b.build()
+    let mut scene = b.build();
+    scene.camera = Some(CORNELL_BOX_CAMERA);
+    scene
 }
+
+/// The Cornell box's published camera (Cornell University Program of Computer Graphics): the
+/// eye 800 mm in front of the opening, looking straight in, 39.3 degrees of vertical field.
+pub const CORNELL_BOX_CAMERA: SceneCamera = SceneCamera {
+    eye: DVec3::new(278.0, 273.0, -800.0),
+    target: DVec3::new(278.0, 273.0, 0.0),
+    fov_deg: 39.3,
+};
 
 /// Adds a block standing on y = 0 with the given top face: the top, then the four sides, the side
 /// under top edge `(a, c)` being `floor(a), a, c, floor(c)` as the published data lists them, all
@@ -724,6 +734,7 @@ fn append(object: &Scene, extra: Builder) -> Scene {
         material,
         material_names: names,
         warnings: Vec::new(),
+        camera: None,
     }
 }
 
@@ -888,6 +899,9 @@ pub fn write_obj(scene: &Scene, obj_path: &Path, title: &str) -> Result<()> {
         faces.len(),
         materials.len()
     );
+    if let Some(camera) = &scene.camera {
+        let _ = writeln!(obj, "{}", camera.to_line());
+    }
     let _ = writeln!(obj, "mtllib {mtl_name}");
     for p in &vertices {
         let _ = writeln!(obj, "v {} {} {}", p.x, p.y, p.z);

@@ -89,6 +89,78 @@ pub struct Scene {
     pub material_names: Vec<String>,
     /// Non-fatal findings (missing MTL, no emitter, ...), one line each.
     pub warnings: Vec<String>,
+    /// The camera the scene was published with, if its file names one (a comment line
+    /// `# camera eye X Y Z target X Y Z fov DEG`, see [`SceneCamera::parse`]); a picture of the
+    /// scene uses it unless told otherwise.
+    pub camera: Option<SceneCamera>,
+}
+
+/// A camera stored with a scene: where the eye is, what it looks at, the vertical field of view.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SceneCamera {
+    /// Eye position, scene units.
+    pub eye: DVec3,
+    /// Point looked at, scene units (not the eye).
+    pub target: DVec3,
+    /// Vertical field of view, degrees, in (0, 180).
+    pub fov_deg: f64,
+}
+
+impl SceneCamera {
+    /// The prefix of the comment line that stores a camera in an OBJ file.
+    pub const PREFIX: &'static str = "# camera ";
+
+    /// Reads `# camera eye X Y Z target X Y Z fov DEG`; `None` for any other line. `Some(Err)`
+    /// names what is wrong with a camera line that is malformed (a warning: the scene still
+    /// loads).
+    pub fn parse(line: &str) -> Option<std::result::Result<SceneCamera, String>> {
+        let rest = line.trim().strip_prefix(Self::PREFIX.trim_end())?;
+        let words: Vec<&str> = rest.split_whitespace().collect();
+        let bad = || {
+            format!(
+                "camera comment '{}' is not '{}eye X Y Z target X Y Z fov DEG' with a finite eye \
+                 apart from the target and a field of view in (0, 180); ignored",
+                line.trim(),
+                Self::PREFIX
+            )
+        };
+        let numbers = |w: &[&str]| -> Option<Vec<f64>> {
+            w.iter()
+                .map(|x| x.parse::<f64>().ok().filter(|v| v.is_finite()))
+                .collect()
+        };
+        let camera = (|| {
+            if words.len() != 10 || words[0] != "eye" || words[4] != "target" || words[8] != "fov" {
+                return None;
+            }
+            let eye = numbers(&words[1..4])?;
+            let target = numbers(&words[5..8])?;
+            let fov_deg = numbers(&words[9..10])?[0];
+            let camera = SceneCamera {
+                eye: DVec3::new(eye[0], eye[1], eye[2]),
+                target: DVec3::new(target[0], target[1], target[2]),
+                fov_deg,
+            };
+            (camera.eye != camera.target && fov_deg > 0.0 && fov_deg < 180.0).then_some(camera)
+        })();
+        Some(camera.ok_or_else(bad))
+    }
+
+    /// The comment line [`SceneCamera::parse`] reads back.
+    pub fn to_line(&self) -> String {
+        let f = crate::files::format_f64;
+        format!(
+            "{}eye {} {} {} target {} {} {} fov {}",
+            Self::PREFIX,
+            f(self.eye.x),
+            f(self.eye.y),
+            f(self.eye.z),
+            f(self.target.x),
+            f(self.target.y),
+            f(self.target.z),
+            f(self.fov_deg)
+        )
+    }
 }
 
 /// The shapes of a scene's non-degenerate triangles ([`Scene::shapes`]). The aspect ratio of a
@@ -204,6 +276,10 @@ impl Scene {
         let mut s = self.clone();
         for p in &mut s.positions {
             *p = *p * scale + offset;
+        }
+        if let Some(c) = s.camera.as_mut() {
+            c.eye = c.eye * scale + offset;
+            c.target = c.target * scale + offset;
         }
         s
     }
@@ -393,6 +469,13 @@ pub fn load_obj(path: &Path, options: &SceneOptions) -> Result<Scene> {
         material_names: materials.iter().map(|m| m.name.clone()).collect(),
         ..Scene::default()
     };
+    for (i, raw) in text.lines().enumerate() {
+        match SceneCamera::parse(raw) {
+            Some(Ok(camera)) => scene.camera = Some(camera),
+            Some(Err(message)) => warnings.push(format!("{}:{}: {message}", path.display(), i + 1)),
+            None => {}
+        }
+    }
     let default_albedo = [options.default_albedo; 3];
     for model in &models {
         let mesh = &model.mesh;
