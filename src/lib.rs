@@ -8,12 +8,47 @@
 //! - [`mesh`]: the solver's patches in a unit frame (splitting, twins);
 //! - [`hierarchy`]: the cluster tree and the links between its nodes;
 //! - [`transport`]: the couplings of one sender to one receiver, shared by every solver;
-//! - [`solve`]: options and presets, the dense oracle, the hierarchical solver, exact direct
+//! - [`mod@solve`]: options and presets, the dense oracle, the hierarchical solver, exact direct
 //!   light, relighting, and the [`solve::solution::Solution`] every solver returns;
-//! - [`reference`]: the path tracer used as ground truth;
+//! - [`mod@reference`]: the path tracer used as ground truth;
 //! - [`output`]: CSV, PLY, PNG pictures, atomic writes.
 //!
 //! The command line (`src/cli/`, the `cli` feature) is a client of this library like any other.
+//!
+//! # The front door
+//!
+//! Four calls cover the common job: [`load()`] a scene, [`solve()`] it, [`write()`] the results,
+//! or build a [`relight()`]er that re-solves it for new emission.
+//!
+//! ```
+//! # fn main() -> antiradiance::Result<()> {
+//! use antiradiance::scene::SceneOptions;
+//! use antiradiance::solve::SolverOptions;
+//!
+//! let dir = tempfile::tempdir().unwrap();
+//! let path = dir.path().join("cornell_box.obj");
+//! // A generated scene written to disk, as any OBJ+MTL file would be.
+//! antiradiance::scene::generated::write_obj(
+//!     &antiradiance::scene::generated::cornell_box(),
+//!     &path,
+//!     "Cornell box",
+//! )?;
+//!
+//! let scene = antiradiance::load(&path, &SceneOptions::default())?;
+//! let solved = antiradiance::solve(&scene, None, &SolverOptions::fast())?;
+//! assert_eq!(solved.solution.triangle_radiance.len(), scene.len());
+//! antiradiance::write(&dir.path().join("cornell.csv"), &scene, &solved)?;
+//! antiradiance::write(&dir.path().join("cornell.png"), &scene, &solved)?;
+//!
+//! // Half the light: links are kept, only the sweeps run again.
+//! let mut relighter = antiradiance::relight(&scene, None, &SolverOptions::fast())?;
+//! let half: Vec<[f64; 3]> = scene.emission.iter().map(|e| e.map(|x| 0.5 * x)).collect();
+//! let relit = relighter.relight(&half)?;
+//! let (full, dim) = (solved.solution.triangle_radiance[0][0], relit.solution.triangle_radiance[0][0]);
+//! assert!((dim - 0.5 * full).abs() < 0.02 * full);
+//! # Ok(())
+//! # }
+//! ```
 
 // `!(x > 0.0)` is used on purpose: it is also true for NaN, which must be rejected too.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -32,3 +67,89 @@ pub mod solve;
 pub mod transport;
 
 pub use error::{Error, Result};
+
+use std::path::Path;
+
+use mesh::Patches;
+use scene::{Scene, SceneOptions};
+use solve::relight::Relighter;
+use solve::solution::Solution;
+use solve::{SolverKind, SolverOptions};
+
+/// Reads an OBJ file and the MTL files it names ([`scene::load_obj`]).
+pub fn load(path: &Path, options: &SceneOptions) -> Result<Scene> {
+    scene::load_obj(path, options)
+}
+
+/// A solved scene: the patches it was solved on, the solution, and what to warn about.
+#[derive(Clone, Debug)]
+pub struct Solved {
+    /// The solver's patches (the scene's triangles, split by `max_edge`).
+    pub patches: Patches,
+    /// Radiance per patch and per input triangle, with the solve's statistics.
+    pub solution: Solution,
+    /// What did not fail but is less accurate than asked ([`solve::warnings::solve_warnings`]).
+    pub warnings: Vec<String>,
+}
+
+/// Solves `scene` with the hierarchical solver: input triangles split so no edge is longer
+/// than `max_edge` (scene units; `None` keeps them), then [`solve::run`].
+///
+/// Errors: invalid `options` or `max_edge`, more than [`mesh::MAX_PATCHES`] patches, a solve
+/// that does not fit its memory limit, or one that failed its health checks
+/// ([`solve::solution::SolveStats::check`]).
+pub fn solve(scene: &Scene, max_edge: Option<f64>, options: &SolverOptions) -> Result<Solved> {
+    options.validate()?;
+    let patches = mesh::checked_patches(scene, max_edge)?;
+    let kind = SolverKind::Hierarchical;
+    let solution = solve::run(kind, &patches, options, &progress::Progress::hidden())?;
+    solution.stats.check(kind.name())?;
+    let warnings = solve::warnings::solve_warnings(kind, &solution.stats, options, &patches);
+    Ok(Solved {
+        patches,
+        solution,
+        warnings,
+    })
+}
+
+/// A [`Relighter`] for `scene`: tree and links built once, re-solved for new emission.
+pub fn relight(scene: &Scene, max_edge: Option<f64>, options: &SolverOptions) -> Result<Relighter> {
+    Relighter::new(scene, max_edge, options)
+}
+
+/// Writes a result, chosen by the file's extension: `.csv` the per-triangle CSV
+/// ([`output::write_triangles_csv`]), `.ply` the coloured mesh at auto exposure
+/// ([`output::write_ply`]), `.png` a smoothly shaded picture from the scene's camera or
+/// auto-framed ([`output::render::render_png_shaded`]). Atomic: a failure leaves no file.
+pub fn write(path: &Path, scene: &Scene, solved: &Solved) -> Result<()> {
+    let extension = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    match extension.as_deref() {
+        Some("csv") => output::write_triangles_csv(path, scene, &solved.solution),
+        Some("ply") => {
+            let exposure = output::render::auto_exposure(&solved.patches, &solved.solution);
+            output::write_ply(path, &solved.patches, &solved.solution, exposure)
+        }
+        Some("png") => {
+            let mut camera = output::render::CameraOptions::default();
+            if let Some(c) = scene.camera {
+                camera.eye = Some(c.eye);
+                camera.target = Some(c.target);
+                camera.fov_deg = c.fov_deg;
+            }
+            output::render::render_png_shaded(
+                path,
+                &solved.patches,
+                &solved.solution,
+                &camera,
+                output::render::Shading::Smooth,
+            )
+        }
+        _ => Err(Error::Parameter(format!(
+            "{}: write needs a .csv, .ply or .png file name",
+            path.display()
+        ))),
+    }
+}

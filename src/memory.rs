@@ -126,7 +126,7 @@ pub const FALLBACK_MEMORY_LIMIT: u64 = 4 << 30;
 /// per-thread buffers, small arrays): an estimate `e` must fit as `e + e / SLACK_DIVISOR +
 /// SLACK_BYTES`.
 const SLACK_DIVISOR: u64 = 8;
-/// Bytes added to every estimate (see [`SLACK_DIVISOR`]).
+/// Bytes added to every estimate (see `SLACK_DIVISOR`).
 const SLACK_BYTES: u64 = 16 << 20;
 /// The default memory limit: half the machine's physical memory (`MemTotal` of `/proc/meminfo`
 /// on Linux), [`FALLBACK_MEMORY_LIMIT`] where that is unknown.
@@ -206,7 +206,7 @@ impl Budget {
     }
 
     /// True when an estimate of `bytes` fits, with the slack estimates need (see
-    /// [`SLACK_DIVISOR`]).
+    /// `SLACK_DIVISOR`).
     pub fn fits(&self, bytes: u64) -> bool {
         with_slack(bytes) <= self.available()
     }
@@ -235,7 +235,7 @@ impl Budget {
     }
 }
 
-/// An estimate with its slack (see [`SLACK_DIVISOR`]).
+/// An estimate with its slack (see `SLACK_DIVISOR`).
 fn with_slack(bytes: u64) -> u64 {
     bytes
         .saturating_add(bytes / SLACK_DIVISOR)

@@ -143,7 +143,7 @@ pub fn solid_angle(x: DVec3, tri: &Tri) -> f64 {
 /// normal `n_x`, i.e. the integral of cos(theta_x) |cos(theta_y)| / (pi r^2) over the triangle.
 ///
 /// Lambert's contour formula, exact. Precondition: `tri` lies entirely in the closed half-space in
-/// front of `x` (clip it first with [`clip_to_front`]); then the result is in [0, 1].
+/// front of `x` (clip it first with `clip_to_front`); then the result is in [0, 1].
 pub fn point_form_factor(x: DVec3, n_x: DVec3, tri: &Tri) -> f64 {
     let r = [tri[0] - x, tri[1] - x, tri[2] - x];
     lambert_form_factor(

@@ -4,7 +4,7 @@
 //! patch corners, so a ray through the shared edge or vertex of two triangles never slips
 //! between them. Shared by the reference path tracer and the exact direct light.
 //!
-//! Distances are in the unit frame of [`Patches`]; the self-intersection offset is
+//! Distances are in the unit frame of [`crate::mesh::Patches`]; the self-intersection offset is
 //! [`RAY_EPS`] (in `geometry.rs` with every other tolerance).
 
 use glam::DVec3;

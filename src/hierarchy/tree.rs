@@ -1,7 +1,7 @@
 //! Stage 3a: the cluster tree over the patches, with on-demand subdivision of leaf triangles.
 //!
 //! The upper levels split the patches top down by a surface area heuristic that float noise
-//! does not change (one patch per leaf, [`ClusterTree::build_nodes`]). Below a patch,
+//! does not change (one patch per leaf, `ClusterTree::build_nodes`). Below a patch,
 //! [`ClusterTree::split_leaf`] cuts a leaf triangle in two across its longest edge when link
 //! refinement asks for it, so a coarse input (a floor of two triangles) becomes fine exactly where
 //! transport needs it. After refinement, [`ClusterTree::finalize`] numbers the leaves ("elements")
@@ -221,7 +221,7 @@ fn sah_split(range: &mut [u32], centroid: &[DVec3], corners: &[Tri]) -> usize {
 }
 
 impl ClusterTree {
-    /// Builds the tree over the active patches, one patch per leaf ([`Self::build_nodes`]).
+    /// Builds the tree over the active patches, one patch per leaf (`build_nodes`).
     ///
     /// # Panics
     /// If no patch is active (the loader rejects such scenes).

@@ -8,6 +8,7 @@
 
 use glam::DVec3;
 
+use crate::error::{Error, Result};
 use crate::geometry::{self, Tri};
 use crate::scene::Scene;
 
@@ -153,6 +154,59 @@ pub fn patch_count(scene: &Scene, max_edge: Option<f64>) -> u64 {
     (0..scene.len())
         .map(|t| split_factor(&scene.corners(t), scene.is_degenerate(t), max_edge).pow(2))
         .sum()
+}
+
+/// Checks what [`build_patches`] assumes of a scene: triangles, every per-triangle array
+/// as long as the triangle list, vertex indices in range, finite vertices.
+pub fn check_scene(scene: &Scene) -> Result<()> {
+    let fail = |message: String| Error::Scene {
+        path: scene.path.clone(),
+        message,
+    };
+    if scene.is_empty() {
+        return Err(fail("no triangles".into()));
+    }
+    if scene.albedo.len() != scene.len() || scene.emission.len() != scene.len() {
+        return Err(fail(format!(
+            "{} triangles but {} albedo and {} emission values",
+            scene.len(),
+            scene.albedo.len(),
+            scene.emission.len()
+        )));
+    }
+    for (t, tri) in scene.triangles.iter().enumerate() {
+        if tri.iter().any(|&v| v as usize >= scene.positions.len()) {
+            return Err(fail(format!(
+                "triangle {t} has a vertex index out of range"
+            )));
+        }
+        if !scene.corners(t).iter().all(|p| p.is_finite()) {
+            return Err(fail(format!("triangle {t} has a non-finite vertex")));
+        }
+    }
+    Ok(())
+}
+
+/// [`build_patches`] after checking what it assumes: the scene ([`check_scene`]), a `max_edge`
+/// that is `None` or a positive finite length, and at most [`MAX_PATCHES`] patches (unless the
+/// scene has more triangles than that to begin with).
+pub fn checked_patches(scene: &Scene, max_edge: Option<f64>) -> Result<Patches> {
+    check_scene(scene)?;
+    if let Some(l) = max_edge {
+        if !(l.is_finite() && l > 0.0) {
+            return Err(Error::Parameter(format!(
+                "max edge {l} must be finite and > 0"
+            )));
+        }
+    }
+    let count = patch_count(scene, max_edge);
+    if count > MAX_PATCHES && count > scene.len() as u64 {
+        return Err(Error::Parameter(format!(
+            "max edge {} would split the scene into {count} patches (at most {MAX_PATCHES})",
+            max_edge.unwrap_or(0.0),
+        )));
+    }
+    Ok(build_patches(scene, max_edge))
 }
 
 /// Builds the patches of a scene. Each input triangle whose longest edge exceeds `max_edge`

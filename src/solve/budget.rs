@@ -12,13 +12,13 @@
 //!   the per-sweep state from elements x stored bins once the live bins are known;
 //! - the pair cache and the Anderson history, which only buy speed, get what is left;
 //! - the exact direct light ([`direct_light_bytes`]) is skipped when it does not fit;
-//! - the dense solver ([`dense_bytes`]) refuses with [`Error::Memory`] when it does not fit.
+//! - the dense solver ([`dense_bytes`]) refuses with [`crate::Error::Memory`] when it does not fit.
 //!
 //! When the hierarchical model does not fit, [`Prepared::new`](crate::solve::hierarchical::Prepared::new)
 //! coarsens it step by step: the pair cache off first, then epsilon doubled up to
 //! [`MAX_COARSE_EPSILON`], then the split depth lowered by two down to 0, then two bins per side
 //! fewer down to [`MIN_COARSE_BINS`] ([`coarser`]).
-//! When even the coarsest model does not fit, the solve ends with [`Error::Memory`] before the
+//! When even the coarsest model does not fit, the solve ends with [`crate::Error::Memory`] before the
 //! large arrays are allocated. What was coarsened is reported ([`MemoryStats`]).
 //!
 //! Sizes are in bytes; the suffixes of [`parse_size`] and the figures of

@@ -17,7 +17,7 @@
 //! - the unoccluded part `U = sum_s E_s F(e <- s)` is analytic (Lambert's point-to-triangle form
 //!   factor, the emitter clipped to the receiver's front half-space, integrated over the element
 //!   with 1..6 x 6 points chosen by separation, as the solvers' couplings do); emitters joined
-//!   edge to edge with the same emission and normal form an [`EmitterGroup`] whose members'
+//!   edge to edge with the same emission and normal form an `EmitterGroup` whose members'
 //!   far-field terms are one contour sum over the group's boundary (exactly the members' sum),
 //!   so a light made of hundreds of triangles costs about as much as its rim;
 //! - the visible fraction comes from shadow rays: stratified points on the element, emitter
@@ -26,7 +26,7 @@
 //!   by area, stratified points on the member; each sample's unoccluded contribution `f_i` is
 //!   weighed by its visibility `V_i`, and each group's fraction is `sum f_i V_i / sum f_i` over
 //!   its samples (a ratio estimator: its bias falls as 1/samples); groups with fewer than
-//!   [`GROUP_SAMPLES`] samples share one fraction.
+//!   `GROUP_SAMPLES` samples share one fraction.
 //!
 //! Fully lit elements get exactly `U`, elements in umbra exactly 0, a well-sampled light wholly
 //! seen or wholly hidden counts fully or not at all; noise is confined to penumbrae.
@@ -575,7 +575,7 @@ impl<'a> DirectLight<'a> {
             || receivers as u64 * MIN_SHADOW_SAMPLES as u64 > MAX_SHADOW_RAYS
     }
 
-    /// Number of emitter groups (see [`EmitterGroup`]); at most the number of emitters.
+    /// Number of emitter groups (see `EmitterGroup`); at most the number of emitters.
     pub fn group_count(&self) -> usize {
         self.groups.len()
     }
@@ -815,7 +815,7 @@ impl<'a> DirectLight<'a> {
     /// sees.) `V_g = sum g_i v_i / sum g_i` over the group's samples, with `g_i` a sample's
     /// unoccluded contribution and `v_i` its visibility (a ratio estimator, bias falling as
     /// 1/samples): a group wholly visible counts exactly `F_g`, a hidden one exactly 0, and
-    /// noise is confined to penumbrae. Groups with fewer than [`GROUP_SAMPLES`] light-carrying
+    /// noise is confined to penumbrae. Groups with fewer than `GROUP_SAMPLES` light-carrying
     /// samples take the pooled fraction of all such groups' samples (failing that, of all
     /// samples; 1 when no sample carried light).
     ///

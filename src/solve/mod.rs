@@ -89,7 +89,7 @@ impl Preset {
 /// Solves `patches` with the `kind` solver, with exact direct light when
 /// `options.direct_light` is set ([`direct`]). Precondition: `options.validate()` passed.
 ///
-/// Errors: [`Error::Memory`] when the solve does not fit `options.memory_limit_bytes` (see
+/// Errors: [`crate::Error::Memory`] when the solve does not fit `options.memory_limit_bytes` (see
 /// [`crate::solve::budget`]).
 pub fn run(
     kind: SolverKind,

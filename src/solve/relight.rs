@@ -49,7 +49,7 @@
 //! # }
 //! ```
 //!
-//! The command `antiradiance relight` ([`relight`]) animates a light this way and writes one
+//! The command `antiradiance relight` animates a light this way and writes one
 //! picture per frame with the time each relight took.
 
 use std::path::{Path, PathBuf};
@@ -128,24 +128,8 @@ impl Relighter {
     /// vertex index out of range.
     pub fn new(scene: &Scene, max_edge: Option<f64>, options: &SolverOptions) -> Result<Relighter> {
         let start = Instant::now();
-        check_scene(scene)?;
-        if let Some(l) = max_edge {
-            if !(l.is_finite() && l > 0.0) {
-                return Err(Error::Parameter(format!(
-                    "max edge {l} must be finite and > 0"
-                )));
-            }
-        }
-        let count = mesh::patch_count(scene, max_edge);
-        if count > mesh::MAX_PATCHES && count > scene.len() as u64 {
-            return Err(Error::Parameter(format!(
-                "max edge {} would split the scene into {count} patches (at most {})",
-                max_edge.unwrap_or(0.0),
-                mesh::MAX_PATCHES
-            )));
-        }
+        let patches = mesh::checked_patches(scene, max_edge)?;
         options.validate()?;
-        let patches = mesh::build_patches(scene, max_edge);
         let mut relighter = Relighter::from_patches(scene, patches, options)?;
         relighter.build_seconds = start.elapsed().as_secs_f64();
         Ok(relighter)
@@ -162,7 +146,7 @@ impl Relighter {
         options: &SolverOptions,
     ) -> Result<Relighter> {
         let start = Instant::now();
-        check_scene(scene)?;
+        mesh::check_scene(scene)?;
         options.validate()?;
         if patches.first.len() != scene.len() + 1
             || patches.parent.len() != patches.len()
@@ -541,37 +525,6 @@ fn check_radiance(rgb: [f64; 3], what: impl FnOnce() -> String) -> Result<()> {
             rgb[2]
         )))
     }
-}
-
-/// Checks what [`mesh::build_patches`] assumes of a scene: triangles, every per-triangle array
-/// as long as the triangle list, vertex indices in range, finite vertices.
-fn check_scene(scene: &Scene) -> Result<()> {
-    let fail = |message: String| Error::Scene {
-        path: scene.path.clone(),
-        message,
-    };
-    if scene.is_empty() {
-        return Err(fail("no triangles".into()));
-    }
-    if scene.albedo.len() != scene.len() || scene.emission.len() != scene.len() {
-        return Err(fail(format!(
-            "{} triangles but {} albedo and {} emission values",
-            scene.len(),
-            scene.albedo.len(),
-            scene.emission.len()
-        )));
-    }
-    for (t, tri) in scene.triangles.iter().enumerate() {
-        if tri.iter().any(|&v| v as usize >= scene.positions.len()) {
-            return Err(fail(format!(
-                "triangle {t} has a vertex index out of range"
-            )));
-        }
-        if !scene.corners(t).iter().all(|p| p.is_finite()) {
-            return Err(fail(format!("triangle {t} has a non-finite vertex")));
-        }
-    }
-    Ok(())
 }
 
 // ---------------------------------------------------------------------------------------------
