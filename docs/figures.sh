@@ -1,0 +1,114 @@
+#!/usr/bin/env bash
+# Re-measures the tables of docs/performance.md and docs/accuracy.md (and, through
+# docs/mesh_quality.sh, docs/mesh_quality.md). It takes long (hours with the growth series and
+# the benches) and is not run by CI; the figures land in OUT_DIR (default figures/) as the
+# reports, CSVs and logs the tables quote, one file per command, so a table row can be checked
+# against the file of its command.
+#
+#     cargo build --release && docs/figures.sh [OUT_DIR]
+#
+# Environment:
+#   ANTIRADIANCE  the binary (default target/release/antiradiance)
+#   MESHES        the folder of the seed meshes (default ../shared/meshes); rows that need a
+#                 mesh that is not there are skipped with a message
+#   RUNS          runs per timed command (default 5; the tables quote min / median / max)
+#   PARTS         which parts, in order (default "room accuracy growth memory bench relight
+#                 mesh_quality")
+# Uses only the binary, cargo, bash and coreutils.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+B=${ANTIRADIANCE:-target/release/antiradiance}
+MESHES=${MESHES:-../shared/meshes}
+RUNS=${RUNS:-5}
+PARTS=${PARTS:-room accuracy growth memory bench relight mesh_quality}
+OUT=${1:-figures}
+mkdir -p "$OUT"
+ROOM=$MESHES/room_radiosity_small.obj
+ROOM_OPTS=(--emit-above 3.65 --albedo 0.75)
+say() { echo "figures.sh: $*" >&2; }
+have() { [ -f "$1" ] || { say "skipped: $1 is absent"; return 1; }; }
+
+# performance.md, "The seed room": every preset, RUNS runs each (one for accurate).
+room() {
+  have "$ROOM" || return 0
+  for preset in default fast accurate; do
+    local runs=$RUNS
+    [ "$preset" = accurate ] && runs=1
+    for i in $(seq 1 "$runs"); do
+      "$B" solve "$ROOM" "${ROOM_OPTS[@]}" --preset "$preset" --quiet \
+        --report "$OUT/room_${preset}_$i.json" --triangles "$OUT/room_${preset}_$i.csv"
+    done
+  done
+  for i in $(seq 1 "$RUNS"); do
+    "$B" solve "$ROOM" "${ROOM_OPTS[@]}" --no-direct-light --quiet --report "$OUT/room_nodl_$i.json"
+  done
+  "$B" solve "$ROOM" "${ROOM_OPTS[@]}" --solver dense --no-direct-light --quiet \
+    --report "$OUT/room_dense.json" --triangles "$OUT/room_dense.csv"
+}
+
+# accuracy.md, "Summary": the references, then each row's solve against them (the error is the
+# report's; `compare` prints it too).
+accuracy() {
+  "$B" reference scenes/cornell_box.obj --max-edge 60 --spp 512 --quiet --triangles "$OUT/cornell_ref.csv"
+  "$B" sweep scenes/cornell_box.obj --reference "$OUT/cornell_ref.csv" --repeat 5 --time-axis cpu \
+    --csv "$OUT/sweep_cornell.csv" --svg "$OUT/sweep_cornell.svg"
+  "$B" sweep scenes/cornell_box.obj --max-edge 60 --reference "$OUT/cornell_ref.csv" --repeat 2 \
+    --time-axis cpu --csv "$OUT/sweep_cornell_me60.csv" --svg "$OUT/sweep_cornell_me60.svg"
+  if have "$ROOM"; then
+    "$B" reference "$ROOM" "${ROOM_OPTS[@]}" --spp 256 --quiet --triangles "$OUT/room_ref.csv"
+    "$B" sweep "$ROOM" "${ROOM_OPTS[@]}" --reference "$OUT/room_ref.csv" --time-axis cpu \
+      --csv "$OUT/sweep_room.csv" --svg "$OUT/sweep_room.svg"
+    "$B" sweep "$ROOM" "${ROOM_OPTS[@]}" --reference "$OUT/room_ref.csv" --time-axis cpu \
+      --preset fast,default,accurate --epsilon preset --bins preset \
+      --csv "$OUT/sweep_presets.csv" --svg "$OUT/sweep_presets.svg"
+  fi
+  if have "$MESHES/bear.obj"; then
+    "$B" scene in-room "$MESHES/bear.obj" --out "$OUT/bear_room.obj"
+    "$B" reference "$OUT/bear_room.obj" --max-edge 1 --spp 512 --quiet --triangles "$OUT/bear_room_ref.csv"
+    "$B" sweep "$OUT/bear_room.obj" --reference "$OUT/bear_room_ref.csv" --epsilon preset --bins preset \
+      --direct-light on,off --csv "$OUT/sweep_bear_room.csv"
+  fi
+  cargo test --release --test sweep -- --nocapture > "$OUT/occluder.log" 2>&1
+}
+
+# performance.md, "Growth": the subdivided Cornell box from 1k to 1M triangles.
+growth() {
+  for n in 1000 4000 16000 64000 256000 1000000; do
+    "$B" scene cornell-box --triangles "$n" --out "$OUT/cb_$n.obj"
+    "$B" solve "$OUT/cb_$n.obj" --quiet --report "$OUT/growth_$n.json"
+  done
+}
+
+# performance.md, "Memory budget": the office mesh at the default limit, 2G and 1G.
+memory() {
+  "$B" scene office --out "$OUT/office.obj"
+  "$B" solve "$OUT/office.obj" --quiet --report "$OUT/office_default.json" || true
+  "$B" solve "$OUT/office.obj" --memory-limit 2G --quiet --report "$OUT/office_2g.json" || true
+  "$B" solve "$OUT/office.obj" --memory-limit 1G --quiet --report "$OUT/office_1g.json" \
+    2> "$OUT/office_1g.log" || true
+}
+
+# performance.md, criterion tables.
+bench() {
+  cargo bench --bench solvers > "$OUT/bench_solvers.log" 2>&1
+}
+
+# performance.md, "Relighting".
+relight() {
+  have "$ROOM" || return 0
+  "$B" relight "$ROOM" "${ROOM_OPTS[@]}" --frames 8 --out "$OUT/frames_default" --quiet --report "$OUT/relight_default.json"
+  "$B" relight "$ROOM" "${ROOM_OPTS[@]}" --preset fast --frames 8 --out "$OUT/frames_fast" --quiet --report "$OUT/relight_fast.json"
+  "$B" relight "$ROOM" "${ROOM_OPTS[@]}" --frames 8 --bands 8 --out "$OUT/frames_bands" --quiet --report "$OUT/relight_bands.json"
+  cargo bench --bench relight > "$OUT/bench_relight.log" 2>&1
+}
+
+# docs/mesh_quality.md.
+mesh_quality() {
+  ANTIRADIANCE=$B docs/mesh_quality.sh "$OUT/mesh_quality" > "$OUT/mesh_quality.md"
+}
+
+for part in $PARTS; do
+  say "$part"
+  "$part"
+done
+say "done: $OUT"
