@@ -7,36 +7,11 @@
 pub mod bins;
 pub mod raytrace;
 pub mod sampling;
+pub mod tolerances;
 
 use glam::DVec3;
 
-/// Relative tolerance for "this point lies in that plane": distances below
-/// `PLANE_EPS * size` count as zero, where `size` is the larger triangle's longest edge.
-/// Rounding of the unit-frame arithmetic is far below it. See also [`SCENE_EPS`] and
-/// [`plane_tol`], which every plane decision uses.
-pub const PLANE_EPS: f64 = 1e-9;
-
-/// Absolute tolerance of every plane decision ("coplanar", "behind", "in front"), unit frame
-/// (scene diameter 1): a point within `SCENE_EPS` of a plane lies in it.
-///
-/// Exported files carry float noise: 6 to 7 significant digits, or a vertex jitter of 1e-6 in
-/// world units, move a vertex off its neighbours' plane by up to a few 1e-6 of the scene
-/// diameter, and with exact decisions every such pair of coplanar neighbours became a costly
-/// exact coupling (the seed room jittered by 1e-6: +45% links). The thinnest geometry that
-/// matters in an interior (a 1 mm blind slat in a 10 m room, 1e-4) is far above it. What is
-/// lost: a surface closer than 1e-5 of the scene diameter to another's plane exchanges nothing
-/// with it (a sheet of paper on a desk), which is below what any binning resolves.
-pub const SCENE_EPS: f64 = 1e-5;
-
-/// The tolerance of a plane decision between objects of size `size` (unit frame):
-/// `PLANE_EPS * size + SCENE_EPS`.
-pub fn plane_tol(size: f64) -> f64 {
-    PLANE_EPS * size + SCENE_EPS
-}
-
-/// Self-intersection offset for visibility rays, relative to the scene's diameter (the solver and
-/// the path tracer work in a frame where the diameter is 1).
-pub const RAY_EPS: f64 = 1e-6;
+pub use tolerances::{plane_tol, PLANE_EPS, RAY_EPS, SCENE_EPS};
 
 /// A triangle by its three corners.
 pub type Tri = [DVec3; 3];

@@ -13,11 +13,8 @@ use obvhs::cwbvh::{builder::build_cwbvh, CwBvh};
 use obvhs::ray::{Ray, RayHit};
 use obvhs::{Boundable, BvhBuildParams};
 
-use crate::geometry::{Tri, RAY_EPS};
-
-/// Absolute padding (unit frame) of the f32 boxes the BVH is built over, so that rounding the
-/// f64 corners and rays to f32 never culls a box that holds an f64 hit.
-const BOX_PAD: f32 = 1e-5;
+use crate::geometry::tolerances::{BOX_PAD, BOX_PAD_RELATIVE, RAY_EPS, RAY_T_SLACK};
+use crate::geometry::Tri;
 
 // ---------------------------------------------------------------------------------------------
 // Watertight ray-triangle intersection
@@ -128,8 +125,8 @@ impl Boundable for PaddedBox {
 fn padded_box(tri: &Tri) -> PaddedBox {
     let lo = tri[0].min(tri[1]).min(tri[2]).as_vec3a();
     let hi = tri[0].max(tri[1]).max(tri[2]).as_vec3a();
-    let pad_lo = lo.abs() * 1e-6 + BOX_PAD;
-    let pad_hi = hi.abs() * 1e-6 + BOX_PAD;
+    let pad_lo = lo.abs() * BOX_PAD_RELATIVE + BOX_PAD;
+    let pad_hi = hi.abs() * BOX_PAD_RELATIVE + BOX_PAD;
     PaddedBox {
         aabb: Aabb {
             min: lo - pad_lo,
@@ -140,7 +137,7 @@ fn padded_box(tri: &Tri) -> PaddedBox {
 
 /// An f32 distance bound at least as large as the f64 distance `t`, for BVH culling.
 fn conservative_f32(t: f64) -> f32 {
-    (t * (1.0 + 1e-5) + 1e-5) as f32
+    (t * (1.0 + RAY_T_SLACK) + RAY_T_SLACK) as f32
 }
 
 /// Closest hit of a ray: patch index, distance, point on the patch.

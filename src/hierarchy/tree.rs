@@ -11,7 +11,7 @@ use std::time::Duration;
 
 use glam::DVec3;
 
-use crate::geometry::{self, Tri};
+use crate::geometry::{self, tolerances, Tri};
 use crate::mesh::Patches;
 
 /// Marker for "no node / no patch".
@@ -204,7 +204,7 @@ fn sah_split(range: &mut [u32], centroid: &[DVec3], corners: &[Tri]) -> usize {
                 continue;
             }
             let cost = left.0 as f64 * area(left.1) + n_right as f64 * area(box_right);
-            if best.is_none_or(|b| cost < b.0 * (1.0 - 1e-6)) {
+            if best.is_none_or(|b| cost < b.0 * (1.0 - tolerances::SAH_IMPROVEMENT)) {
                 best = Some((cost, axis, k, lo, span));
             }
         }
@@ -439,7 +439,8 @@ impl ClusterTree {
                 let sin_theta = (1.0 - cos_theta * cos_theta).sqrt();
                 let sin_alpha = (1.0 - cos_alpha * cos_alpha).sqrt();
                 // Safety margin for rounding.
-                len * ((cos_theta * cos_alpha + sin_theta * sin_alpha) + 1e-9).min(1.0)
+                len * ((cos_theta * cos_alpha + sin_theta * sin_alpha) + tolerances::CONE_COS_SLACK)
+                    .min(1.0)
             }
         } else {
             0.0
@@ -616,7 +617,10 @@ impl ClusterTree {
                 } else {
                     (child.center - n.center).length() + child.radius
                 };
-                if reach > n.radius * (1.0 + 1e-9) + 1e-12 {
+                if reach
+                    > n.radius * (1.0 + tolerances::TREE_CHECK_RELATIVE)
+                        + tolerances::TREE_CHECK_ABSOLUTE
+                {
                     return Err(format!("node {i}'s sphere does not contain child {c}"));
                 }
                 if !self.elements.is_empty()
@@ -626,7 +630,7 @@ impl ClusterTree {
                 }
                 area += child.area;
             }
-            if (area - n.area).abs() > 1e-9 * n.area.max(1e-300) {
+            if (area - n.area).abs() > tolerances::TREE_CHECK_RELATIVE * n.area.max(1e-300) {
                 return Err(format!("node {i}'s area {} != children's {area}", n.area));
             }
         }

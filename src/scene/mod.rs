@@ -186,11 +186,7 @@ pub struct TriangleShapes {
     pub area_range: f64,
 }
 
-/// Largest `|sin|` of a triangle's corner angle below which it counts as degenerate (zero area).
-///
-/// Relative to the triangle's own edges, so it does not depend on the scene's scale: a sliver with
-/// aspect ratio 1e6 (sin ~ 1e-6) is a real triangle, three collinear points (sin ~ 1e-16) are not.
-pub const DEGENERATE_SIN: f64 = 1e-10;
+pub use crate::geometry::tolerances::DEGENERATE_SIN;
 
 impl Scene {
     /// Number of input triangles.

@@ -44,6 +44,7 @@ use rayon::prelude::*;
 use crate::error::Result;
 use crate::geometry::raytrace::RayScene;
 use crate::geometry::sampling::{point_on_triangle, Rng};
+use crate::geometry::tolerances::GROUP_NORMAL_TOLERANCE;
 use crate::geometry::{self, plane_tol, PLANE_EPS};
 use crate::mesh::Patches;
 use crate::progress::Progress;
@@ -172,10 +173,6 @@ struct GroupLight {
     /// The group's mean unoccluded form factor seen from the receiver (> 0).
     form_factor: f64,
 }
-
-/// Largest deviation between the normals of two emitters merged into one group (|n_a - n_b|,
-/// about the angle in radians).
-const GROUP_NORMAL_TOLERANCE: f64 = 1e-3;
 
 /// A set of emitters joined edge to edge, with the same emission and (nearly) the same normal,
 /// such as a ceiling light made of hundreds of triangles.

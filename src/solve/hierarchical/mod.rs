@@ -19,6 +19,7 @@ use rayon::prelude::*;
 
 use crate::error::Result;
 use crate::geometry::bins::Bins;
+use crate::geometry::tolerances::{SAME_NORMAL, UNIT_NORMAL_SLACK};
 use crate::hierarchy::links::{self, ClusterLink, LinkParams, Links};
 use crate::hierarchy::{ClusterTree, NONE};
 use crate::mesh::Patches;
@@ -857,9 +858,6 @@ const PULL_PER_ELEMENT_MAX: u32 = 8;
 const MAX_EXACT_GROUPS: usize = 8;
 const GROUP_CELLS: usize = 4;
 
-/// Two unit normals closer than this (1 - cos) are the same group.
-const SAME_NORMAL: f64 = 1e-9;
-
 /// Normal groups of the large nodes (more than [`PULL_PER_ELEMENT_MAX`] elements).
 ///
 /// A cluster link's sender sends `sum_e a_e (B_e max(0, n_e . w) - A_e[bin] max(0, -n_e . w))`;
@@ -958,7 +956,7 @@ impl SenderGroups {
             let mut key_of: Vec<usize> = Vec::with_capacity(inputs.len());
             let mut exact = true;
             for ((_, n, _), &back) in inputs.iter().zip(&input_back) {
-                if (n.length_squared() - 1.0).abs() > 1e-9 {
+                if (n.length_squared() - 1.0).abs() > UNIT_NORMAL_SLACK {
                     exact = false;
                     break;
                 }

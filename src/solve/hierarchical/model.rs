@@ -124,14 +124,14 @@ pub fn back_blocking(patches: &Patches, options: &crate::solve::SolverOptions) -
     }
 }
 
-/// Tolerance of the convexity test, unit frame (scene diameter 1): a vertex this far behind a
-/// plane still counts as on it.
-pub const CONVEX_TOLERANCE: f64 = 1e-7;
+pub use crate::geometry::tolerances::CONVEX_TOLERANCE;
 
-/// True when `rgb` is grey: its three channels equal up to a relative 1e-12.
+/// True when `rgb` is grey: its three channels equal up to a relative
+/// [`crate::geometry::tolerances::GREY_RELATIVE`].
 pub fn is_grey(rgb: [f64; 3]) -> bool {
     let scale = rgb[0].abs().max(rgb[1].abs()).max(rgb[2].abs());
-    (rgb[0] - rgb[1]).abs() <= 1e-12 * scale && (rgb[0] - rgb[2]).abs() <= 1e-12 * scale
+    let tol = crate::geometry::tolerances::GREY_RELATIVE * scale;
+    (rgb[0] - rgb[1]).abs() <= tol && (rgb[0] - rgb[2]).abs() <= tol
 }
 
 /// True when every element of a finalized tree lies on or in front of the plane of every other

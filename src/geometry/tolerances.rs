@@ -1,0 +1,93 @@
+//! Every tolerance of the crate, each with its unit and the reason for its value. Health
+//! thresholds (how much divergence or negative mass fails a solve) are in
+//! [`crate::solve::health`] and memory margins in [`crate::memory`]; they are limits, not
+//! rounding allowances.
+//!
+//! Unit frame: the solver's coordinates, centred on the scene's bounds and scaled to diameter 1
+//! ([`crate::mesh::UnitFrame`]), so an absolute tolerance there is a fraction of the scene.
+
+/// Relative tolerance for "this point lies in that plane": distances below
+/// `PLANE_EPS * size` count as zero, where `size` is the larger triangle's longest edge.
+/// Rounding of the unit-frame arithmetic is far below it. See also [`SCENE_EPS`] and
+/// [`plane_tol`], which every plane decision uses.
+pub const PLANE_EPS: f64 = 1e-9;
+
+/// Absolute tolerance of every plane decision ("coplanar", "behind", "in front"), unit frame
+/// (scene diameter 1): a point within `SCENE_EPS` of a plane lies in it.
+///
+/// Exported files carry float noise: 6 to 7 significant digits, or a vertex jitter of 1e-6 in
+/// world units, move a vertex off its neighbours' plane by up to a few 1e-6 of the scene
+/// diameter, and with exact decisions every such pair of coplanar neighbours became a costly
+/// exact coupling (the seed room jittered by 1e-6: +45% links). The thinnest geometry that
+/// matters in an interior (a 1 mm blind slat in a 10 m room, 1e-4) is far above it. What is
+/// lost: a surface closer than 1e-5 of the scene diameter to another's plane exchanges nothing
+/// with it (a sheet of paper on a desk), which is below what any binning resolves.
+pub const SCENE_EPS: f64 = 1e-5;
+
+/// The tolerance of a plane decision between objects of size `size` (unit frame):
+/// `PLANE_EPS * size + SCENE_EPS`.
+pub fn plane_tol(size: f64) -> f64 {
+    PLANE_EPS * size + SCENE_EPS
+}
+
+/// Self-intersection offset for visibility rays, relative to the scene's diameter (the solver and
+/// the path tracer work in a frame where the diameter is 1).
+pub const RAY_EPS: f64 = 1e-6;
+
+/// Largest `|sin|` of a triangle's corner angle below which it counts as degenerate (zero area).
+///
+/// Relative to the triangle's own edges, so it does not depend on the scene's scale: a sliver with
+/// aspect ratio 1e6 (sin ~ 1e-6) is a real triangle, three collinear points (sin ~ 1e-16) are not.
+
+pub const DEGENERATE_SIN: f64 = 1e-10;
+
+/// Padding of the f32 boxes the ray-tracing BVH is built over, unit frame, so that rounding
+/// the f64 corners and rays to f32 never culls a box that holds an f64 hit: an absolute part
+/// ([`BOX_PAD`], above f32 rounding at unit magnitude, 6e-8) and a part relative to the
+/// coordinate ([`BOX_PAD_RELATIVE`], above f32's relative rounding, 6e-8).
+pub const BOX_PAD: f32 = 1e-5;
+
+/// See [`BOX_PAD`].
+pub const BOX_PAD_RELATIVE: f32 = 1e-6;
+
+/// Slack of the f32 distance bound that culls BVH boxes beyond an f64 hit (relative and
+/// absolute, unit frame): the bound must never fall below the f64 distance after rounding.
+pub const RAY_T_SLACK: f64 = 1e-5;
+
+/// A cluster-tree split is taken only when its surface-area cost is below the best so far by
+/// this relative margin, so that ties between bins, which float noise of the input would break
+/// differently, keep the first bin.
+pub const SAH_IMPROVEMENT: f64 = 1e-6;
+
+/// Rounding margin added to the cosine bound of a normal cone (dimensionless), so a cone never
+/// excludes a direction it contains.
+pub const CONE_COS_SLACK: f64 = 1e-9;
+
+/// Relative rounding allowed by the cluster tree's invariant checks (a child's sphere inside its
+/// parent's, areas summing to the parent's): far above the rounding of the sums they compare
+/// (about 1e-15 per operation), far below any real violation.
+pub const TREE_CHECK_RELATIVE: f64 = 1e-9;
+
+/// Absolute part of the same checks, unit frame.
+pub const TREE_CHECK_ABSOLUTE: f64 = 1e-12;
+
+/// Two normals of one sender group are the same when 1 - cos of their angle is at most this
+/// (dimensionless; about 4.5e-5 radians): equal up to rounding, so groups are exact.
+pub const SAME_NORMAL: f64 = 1e-9;
+
+/// A normal is taken as unit when its squared length is within this of 1 (dimensionless);
+/// normals that are not (degenerate corners) send the groups to the coarse direction grid.
+pub const UNIT_NORMAL_SLACK: f64 = 1e-9;
+
+/// Tolerance of the convexity test, unit frame: a vertex this far behind a plane still counts
+/// as on it. Coarser than [`SCENE_EPS`] is not needed (the test compares whole planes), and
+/// finer than exported-file noise would call a closed box with a jittered corner non-convex.
+pub const CONVEX_TOLERANCE: f64 = 1e-7;
+
+/// A colour is grey when its channels agree to this relative amount (dimensionless): exact up
+/// to the rounding of reading the same number three times.
+pub const GREY_RELATIVE: f64 = 1e-12;
+
+/// Largest deviation between the normals of two emitters merged into one direct-light group
+/// (|n_a - n_b|, about the angle in radians): coplanar up to the noise of exported files.
+pub const GROUP_NORMAL_TOLERANCE: f64 = 1e-3;
