@@ -1,0 +1,227 @@
+//! One Jacobi sweep of the hierarchical solver (pull along the cluster links, gather per
+//! element) and the packing of its state for Anderson acceleration and extrapolation.
+
+use super::*;
+
+/// Sums over a sweep's elements: relative change numerator and denominator, largest row sum
+/// (exact links), largest |B|, and whether every value written was finite.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct SweepSums {
+    pub(super) num: f64,
+    pub(super) den: f64,
+    pub(super) max_row: f64,
+    pub(super) largest: f64,
+    pub(super) finite: bool,
+}
+
+impl Default for SweepSums {
+    fn default() -> Self {
+        SweepSums {
+            num: 0.0,
+            den: 0.0,
+            max_row: 0.0,
+            largest: 0.0,
+            finite: true,
+        }
+    }
+}
+
+impl SweepSums {
+    pub(super) fn add(self, o: SweepSums) -> SweepSums {
+        SweepSums {
+            num: self.num + o.num,
+            den: self.den + o.den,
+            max_row: self.max_row.max(o.max_row),
+            largest: self.largest.max(o.largest),
+            finite: self.finite && o.finite,
+        }
+    }
+}
+
+/// Everything a sweep reads that does not change between sweeps.
+pub(super) struct SweepContext<'a> {
+    pub(super) tree: &'a ClusterTree,
+    pub(super) bins: &'a Bins,
+    pub(super) live: &'a LiveBins,
+    pub(super) elem_area: &'a [f64],
+    pub(super) elem_normal: &'a [DVec3],
+    pub(super) elem_center: &'a [DVec3],
+    pub(super) elem_back: &'a [bool],
+    pub(super) use_anti: bool,
+    pub(super) two_sided: bool,
+}
+
+impl SweepContext<'_> {
+    /// Calls `f` with the index of every cluster link into element `e` or one of its ancestors (element
+    /// first, then up the tree; links of a node in stored order) and the pair's factors.
+    #[inline]
+    pub(super) fn for_each_pair(
+        &self,
+        e: usize,
+        links: &Links,
+        mut f: impl FnMut(usize, &ClusterLink, PairFactor),
+    ) {
+        let (n_e, x_e) = (self.elem_normal[e], self.elem_center[e]);
+        let back = self.two_sided || self.elem_back[e];
+        let mut node = self.tree.elements[e];
+        while node != NONE {
+            let range = links.cluster_start[node as usize] as usize
+                ..links.cluster_start[node as usize + 1] as usize;
+            for (i, l) in range.clone().zip(&links.cluster[range]) {
+                f(i, l, self.pair_factor(l, n_e, x_e, back));
+            }
+            node = self.tree.nodes[node as usize].parent;
+        }
+    }
+
+    /// What a cluster link gives an element with normal `n_e` at `x_e`: irradiance
+    /// `max(0, cos) / (pi (d^2 + spread))` per unit of the link's intensity, with the element's
+    /// own direction and distance from the sender, and antiradiance `1 / ((d^2 + spread)
+    /// Omega_bin)` in the link's bin where the light arrives at a side that creates it (the
+    /// front, and the back too when `back`).
+    #[inline]
+    pub(super) fn pair_factor(
+        &self,
+        l: &ClusterLink,
+        n_e: DVec3,
+        x_e: DVec3,
+        back: bool,
+    ) -> PairFactor {
+        let origin = DVec3::new(l.origin[0] as f64, l.origin[1] as f64, l.origin[2] as f64);
+        let v = x_e - origin;
+        let d2 = v.length_squared();
+        if !(d2 > 0.0) {
+            return PairFactor::default();
+        }
+        let cos = -n_e.dot(v) / d2.sqrt();
+        let g = 1.0 / (d2 + l.spread as f64);
+        let irradiance = if cos > 0.0 {
+            cos * g * std::f64::consts::FRAC_1_PI
+        } else {
+            0.0
+        };
+        let anti = if self.use_anti && (cos > 0.0 || back) {
+            g / self.bins.solid_angle[l.bin as usize]
+        } else {
+            0.0
+        };
+        PairFactor {
+            irradiance: irradiance as f32,
+            anti: anti as f32,
+        }
+    }
+
+    /// The radiant intensity a cluster link's sender sends along the link: B through the front of
+    /// every element, minus antiradiance through the back (both sides when two-sided).
+    #[allow(clippy::needless_range_loop)]
+    pub(super) fn pull<const C: usize>(
+        &self,
+        l: &ClusterLink,
+        groups: &SenderGroups,
+        group_b: &[[f64; C]],
+        group_a: &[[f64; C]],
+        radiance: &[[f64; C]],
+        anti: &[[f32; C]],
+    ) -> [f64; C] {
+        let w = DVec3::new(l.w[0] as f64, l.w[1] as f64, l.w[2] as f64);
+        let bin = l.bin as usize;
+        let mut acc = [0.0f64; C];
+        let mut add = |cos: f64, b: [f64; C], a: [f64; C], both: bool| {
+            if cos > 0.0 {
+                for c in 0..C {
+                    acc[c] += cos * b[c];
+                }
+            }
+            if self.use_anti && (self.two_sided || both || cos < 0.0) {
+                let k = cos.abs();
+                for c in 0..C {
+                    acc[c] -= k * a[c];
+                }
+            }
+        };
+        if groups.is_grouped(l.sender) {
+            let (g0, g1) = groups.range[l.sender as usize];
+            for g in g0 as usize..g1 as usize {
+                add(
+                    groups.normal[g].dot(w),
+                    group_b[g],
+                    group_a[bin * groups.normal.len() + g],
+                    groups.both[g],
+                );
+            }
+        } else {
+            let (e0, e1) = self.tree.nodes[l.sender as usize].elements;
+            for e in e0 as usize..e1 as usize {
+                let a = self.elem_area[e];
+                let a_e = self
+                    .live
+                    .slot(e, bin)
+                    .map_or([0.0; C], |k| anti[k].map(|x| a * x as f64));
+                add(
+                    self.elem_normal[e].dot(w),
+                    radiance[e].map(|x| a * x),
+                    a_e,
+                    self.elem_back[e],
+                );
+            }
+        }
+        acc
+    }
+}
+
+/// Radiance and antiradiance state as one flat vector (radiance first, then the antiradiance
+/// slots in order).
+pub(super) fn pack<const C: usize>(radiance: &[[f64; C]], anti: &[[f32; C]], out: &mut Vec<f64>) {
+    out.clear();
+    out.extend(radiance.iter().flatten());
+    out.extend(anti.iter().flatten().map(|&x| x as f64));
+}
+
+/// The inverse of [`pack`].
+pub(super) fn unpack<const C: usize>(
+    flat: &[f64],
+    radiance: &mut [[f64; C]],
+    anti: &mut [[f32; C]],
+) {
+    let (b, a) = flat.split_at(radiance.len() * C);
+    for (dst, src) in radiance.iter_mut().zip(b.chunks_exact(C)) {
+        dst.copy_from_slice(src);
+    }
+    for (dst, src) in anti.iter_mut().zip(a.chunks_exact(C)) {
+        for c in 0..C {
+            dst[c] = src[c] as f32;
+        }
+    }
+}
+
+/// `x += k (x - x_previous)`, element-wise.
+pub(super) fn extrapolate<const C: usize, T>(x: &mut [[T; C]], x_previous: &[[T; C]], k: f64)
+where
+    T: Copy + Into<f64> + FromF64 + Send + Sync,
+{
+    x.par_iter_mut()
+        .zip(x_previous.par_iter())
+        .for_each(|(a, b)| {
+            for c in 0..C {
+                let (v, p): (f64, f64) = (a[c].into(), b[c].into());
+                a[c] = T::from_f64(v + k * (v - p));
+            }
+        });
+}
+
+/// Conversion back from f64 for [`extrapolate`].
+pub(super) trait FromF64 {
+    fn from_f64(x: f64) -> Self;
+}
+
+impl FromF64 for f64 {
+    fn from_f64(x: f64) -> Self {
+        x
+    }
+}
+
+impl FromF64 for f32 {
+    fn from_f64(x: f64) -> Self {
+        x as f32
+    }
+}

@@ -1,0 +1,95 @@
+use super::*;
+use crate::mesh::build_patches;
+use crate::scene::generated;
+
+impl LiveBins {
+    /// Every bin of every element stored.
+    fn every(n: usize, nb: usize) -> LiveBins {
+        let words = nb.div_ceil(64);
+        let mut mask = vec![0u64; n * words];
+        for e in 0..n {
+            for bin in 0..nb {
+                mask[e * words + (bin >> 6)] |= 1u64 << (bin & 63);
+            }
+        }
+        let start = (0..=n).map(|e| (e * nb) as u32).collect();
+        LiveBins { words, mask, start }
+    }
+}
+
+/// Storing only the live bins gives the result of storing every bin, for one- and two-sided
+/// antiradiance and for a bin count above 64 (several mask words).
+#[test]
+fn live_bins_give_the_result_of_every_bin() {
+    let patches = build_patches(&generated::cornell_box(), Some(150.0));
+    for (bins, two_sided) in [(8, false), (8, true), (9, false)] {
+        let options = SolverOptions {
+            bins,
+            two_sided,
+            max_iterations: 20,
+            // Plain sweeps: bins stored but never read would still steer Anderson's mixing.
+            acceleration_depth: 0,
+            ..SolverOptions::default()
+        };
+        let mut pruned = Prepared::new(&patches, &options, false).unwrap();
+        let mut every = Prepared::new(&patches, &options, false).unwrap();
+        every.live = LiveBins::every(every.element_count(), every.bins.len());
+        assert!(pruned.live.slots() < every.live.slots());
+        let (a, _) = pruned.solve(&patches, &Progress::hidden());
+        let (b, _) = every.solve(&patches, &Progress::hidden());
+        assert_eq!(a.stats.iterations, b.stats.iterations);
+        for (x, y) in a.patch_radiance.iter().zip(&b.patch_radiance) {
+            for c in 0..3 {
+                assert!(
+                    (x[c] - y[c]).abs() <= 1e-9 * y[c].abs().max(1e-6),
+                    "bins {bins} two-sided {two_sided}: {x:?} vs {y:?}"
+                );
+            }
+        }
+    }
+}
+
+/// Transport that creates energy (albedos far above 1, which no scene file can give) makes
+/// the iteration diverge: both solvers stop at the sweep whose radiance overflows and say
+/// so, instead of taking the overflow's zero change for convergence.
+#[test]
+fn an_overflowing_iteration_is_reported_as_diverged() {
+    let mut patches = build_patches(&generated::cornell_box(), None);
+    for a in &mut patches.albedo {
+        *a = a.map(|x| 100.0 * x.max(0.5));
+    }
+    let options = SolverOptions {
+        direct_light: false,
+        ..SolverOptions::default()
+    };
+    let hidden = Progress::hidden();
+    for solution in [
+        solve_hierarchical(&patches, &options, &hidden).unwrap(),
+        crate::solve::dense::solve_dense(&patches, &options, &hidden).unwrap(),
+    ] {
+        let stats = &solution.stats;
+        assert!(stats.failure.is_some() && !stats.converged, "{stats:?}");
+        assert!(stats.iterations < options.max_iterations, "{stats:?}");
+        assert!(solution
+            .patch_radiance
+            .iter()
+            .all(|b| b.iter().all(|x| x.is_finite())));
+    }
+}
+
+#[test]
+fn live_bin_slots_follow_the_mask() {
+    let mut live = LiveBins::empty(2, 130);
+    for (e, bin) in [(0, 3), (0, 64), (0, 129), (1, 0), (1, 70)] {
+        live.mask[e * live.words + (bin >> 6)] |= 1u64 << (bin & 63);
+    }
+    live.start = vec![0, 3, 5];
+    assert_eq!(live.bins_of(0).collect::<Vec<_>>(), vec![3, 64, 129]);
+    assert_eq!(live.bins_of(1).collect::<Vec<_>>(), vec![0, 70]);
+    assert_eq!(live.slot(0, 3), Some(0));
+    assert_eq!(live.slot(0, 64), Some(1));
+    assert_eq!(live.slot(0, 129), Some(2));
+    assert_eq!(live.slot(0, 4), None);
+    assert_eq!(live.slot(1, 70), Some(4));
+    assert_eq!(live.slots(), 5);
+}
