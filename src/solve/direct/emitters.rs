@@ -1,0 +1,285 @@
+//! The emitters of a scene and their groups: emitters edge to edge with the same emission and
+//! normal are one light for the shadow rays.
+
+use super::*;
+
+/// The emitting patches.
+pub(super) struct Emitters {
+    /// Patch index of each emitter.
+    pub(super) patch: Vec<u32>,
+    /// Geometry of each emitter (unit frame).
+    pub(super) geom: Vec<PatchGeom>,
+    /// Emitted radiance (normalized units).
+    pub(super) emission: Vec<[f64; 3]>,
+}
+
+impl Emitters {
+    /// True when patch `p` is an emitter: active and emitting in some channel (positive area x
+    /// largest channel).
+    pub(super) fn emits(patches: &Patches, p: usize) -> bool {
+        let e = patches.emission[p];
+        let w = patches.area[p] * e[0].max(e[1]).max(e[2]);
+        patches.active[p] && w > 0.0 && w.is_finite()
+    }
+
+    /// The number of emitters [`Emitters::new`] finds.
+    pub(super) fn count(patches: &Patches) -> usize {
+        (0..patches.len())
+            .filter(|&p| Emitters::emits(patches, p))
+            .count()
+    }
+
+    /// The active patches that emit in some channel.
+    pub(super) fn new(patches: &Patches) -> Emitters {
+        let mut emitters = Emitters {
+            patch: Vec::new(),
+            geom: Vec::new(),
+            emission: Vec::new(),
+        };
+        for p in 0..patches.len() {
+            let e = patches.emission[p];
+            if Emitters::emits(patches, p) {
+                emitters.patch.push(p as u32);
+                emitters
+                    .geom
+                    .push(PatchGeom::new(patches.corners[p], patches.normal[p]));
+                emitters.emission.push(e);
+            }
+        }
+        emitters
+    }
+
+    pub(super) fn len(&self) -> usize {
+        self.patch.len()
+    }
+}
+
+/// One emitter group's unoccluded light at one receiver: what the receiver's shadow rays are
+/// distributed by.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct GroupLight {
+    /// Index into the groups.
+    pub(super) group: u32,
+    /// The group's mean unoccluded form factor seen from the receiver (> 0).
+    pub(super) form_factor: f64,
+}
+
+/// A set of emitters joined edge to edge, with the same emission and (nearly) the same normal,
+/// such as a ceiling light made of hundreds of triangles.
+///
+/// Seen from a point in front of every member and with every member in front of the point's
+/// plane, the members' form factors sum to Lambert's contour sum over the group's boundary
+/// only: each shared edge appears in its two triangles with opposite directions, and its two
+/// terms cancel exactly (whatever the triangles' planes). So the group costs its boundary edges
+/// instead of three edges per member.
+pub(super) struct EmitterGroup {
+    /// Indices into [`Emitters`].
+    pub(super) members: Vec<u32>,
+    /// Directed boundary edges (start, end), in the members' counter-clockwise order.
+    pub(super) boundary: Vec<(DVec3, DVec3)>,
+    /// The members' corners without repeats (for the receiver-plane test).
+    pub(super) vertices: Vec<DVec3>,
+    /// Area-weighted mean unit normal and centroid.
+    pub(super) normal: DVec3,
+    pub(super) centroid: DVec3,
+    /// Largest |n_member - normal|.
+    pub(super) normal_spread: f64,
+    /// Largest distance of a vertex from the mean plane.
+    pub(super) thickness: f64,
+    /// Bounding sphere of the vertices: centre and radius.
+    pub(super) center: DVec3,
+    pub(super) radius: f64,
+    /// Largest bounding-sphere radius of a member (about its centroid, as
+    /// [`separation`] measures it).
+    pub(super) member_radius: f64,
+    /// For each member (in `members` order) and each of its edges (corner i to i + 1), the
+    /// member across that edge (its position in `members`), or [`NO_NEIGHBOUR`].
+    pub(super) neighbours: Vec<[u32; 3]>,
+    /// Every directed edge belongs to one member at most, so any subset of the members is
+    /// bounded by the edges it does not share with itself (what a group cut by a receiver's
+    /// plane needs).
+    pub(super) manifold: bool,
+    /// The members' common emission (normalized units).
+    pub(super) emission: [f64; 3],
+    /// Total area of the members.
+    pub(super) area: f64,
+    /// Cumulative area fraction of the members, in member order (last entry exactly 1): a
+    /// shadow ray's member is chosen by area, so its point is uniform over the group.
+    pub(super) member_cdf: Vec<f64>,
+}
+
+impl EmitterGroup {
+    /// The member (index into [`Emitters`]) whose cumulative area interval holds `u` in [0, 1).
+    pub(super) fn pick(&self, u: f64) -> usize {
+        self.members[interval_of(&self.member_cdf, u)] as usize
+    }
+}
+
+/// No member across this edge (see [`EmitterGroup::neighbours`]).
+pub(super) const NO_NEIGHBOUR: u32 = u32::MAX;
+
+/// A point's bits as a hash key (with -0.0 folded into 0.0, so equal points give equal keys).
+pub(super) fn point_key(p: DVec3) -> [u64; 3] {
+    [
+        (p.x + 0.0).to_bits(),
+        (p.y + 0.0).to_bits(),
+        (p.z + 0.0).to_bits(),
+    ]
+}
+
+/// Root of `i` in a union-find forest (with path halving).
+pub(super) fn find_root(parent: &mut [u32], mut i: u32) -> u32 {
+    while parent[i as usize] != i {
+        parent[i as usize] = parent[parent[i as usize] as usize];
+        i = parent[i as usize];
+    }
+    i
+}
+
+/// Groups the emitters: two emitters join when they share an edge traversed in opposite
+/// directions (bit-identical end points), emit exactly the same radiance and have normals within
+/// [`GROUP_NORMAL_TOLERANCE`]. Every emitter is in exactly one group (often alone).
+pub(super) fn group_emitters(emitters: &Emitters) -> Vec<EmitterGroup> {
+    use std::collections::HashMap;
+    let n = emitters.len();
+    // 1. Union over shared edges.
+    let mut parent: Vec<u32> = (0..n as u32).collect();
+    let mut edge_owner: HashMap<([u64; 3], [u64; 3]), u32> = HashMap::new();
+    for (k, g) in emitters.geom.iter().enumerate() {
+        for i in 0..3 {
+            let (a, b) = (point_key(g.corners[i]), point_key(g.corners[(i + 1) % 3]));
+            edge_owner.insert((a, b), k as u32);
+        }
+    }
+    for (k, g) in emitters.geom.iter().enumerate() {
+        for i in 0..3 {
+            let (a, b) = (point_key(g.corners[i]), point_key(g.corners[(i + 1) % 3]));
+            let Some(&other) = edge_owner.get(&(b, a)) else {
+                continue;
+            };
+            let o = other as usize;
+            if o == k
+                || emitters.emission[o] != emitters.emission[k]
+                || (emitters.geom[o].normal - g.normal).length() > GROUP_NORMAL_TOLERANCE
+            {
+                continue;
+            }
+            let (ra, rb) = (
+                find_root(&mut parent, k as u32),
+                find_root(&mut parent, other),
+            );
+            if ra != rb {
+                parent[ra.max(rb) as usize] = ra.min(rb);
+            }
+        }
+    }
+    // 2. Members per group, in emitter order.
+    let mut members_of: HashMap<u32, Vec<u32>> = HashMap::new();
+    for k in 0..n as u32 {
+        let root = find_root(&mut parent, k);
+        members_of.entry(root).or_default().push(k);
+    }
+    let mut roots: Vec<u32> = members_of.keys().copied().collect();
+    roots.sort_unstable();
+    // 3. Boundary, plane and bounds of each group.
+    roots
+        .into_iter()
+        .map(|root| {
+            let members = members_of.remove(&root).unwrap_or_default();
+            // Directed edge (start key, end key) -> (start, end, copies).
+            type DirectedEdges = HashMap<([u64; 3], [u64; 3]), (DVec3, DVec3, u32)>;
+            let mut directed: DirectedEdges = HashMap::new();
+            let mut vertices: HashMap<[u64; 3], DVec3> = HashMap::new();
+            let mut normal_sum = DVec3::ZERO;
+            let mut centroid_sum = DVec3::ZERO;
+            let mut area = 0.0;
+            for &m in &members {
+                let g = &emitters.geom[m as usize];
+                normal_sum += g.normal * g.area;
+                centroid_sum += g.centroid * g.area;
+                area += g.area;
+                for i in 0..3 {
+                    let (a, b) = (g.corners[i], g.corners[(i + 1) % 3]);
+                    vertices.insert(point_key(a), a);
+                    directed
+                        .entry((point_key(a), point_key(b)))
+                        .or_insert((a, b, 0))
+                        .2 += 1;
+                }
+            }
+            // An edge is interior when its reverse belongs to the group too: the pair cancels
+            // (copies beyond a pair stay, so the sum always equals the members' sum).
+            let mut boundary = Vec::new();
+            let mut keys: Vec<_> = directed.keys().copied().collect();
+            keys.sort_unstable();
+            for key in keys {
+                let (a, b, count) = directed[&key];
+                let reverse = directed.get(&(key.1, key.0)).map_or(0, |e| e.2);
+                for _ in 0..count.saturating_sub(reverse) {
+                    boundary.push((a, b));
+                }
+            }
+            let normal = normal_sum.normalize_or_zero();
+            let centroid = centroid_sum / area;
+            let mut vertex_list: Vec<([u64; 3], DVec3)> = vertices.into_iter().collect();
+            vertex_list.sort_unstable_by_key(|v| v.0);
+            let vertices: Vec<DVec3> = vertex_list.into_iter().map(|v| v.1).collect();
+            let center = vertices.iter().copied().sum::<DVec3>() / vertices.len() as f64;
+            let radius = vertices
+                .iter()
+                .map(|v| (*v - center).length())
+                .fold(0.0, f64::max);
+            let thickness = vertices
+                .iter()
+                .map(|v| normal.dot(*v - centroid).abs())
+                .fold(0.0, f64::max);
+            let normal_spread = members
+                .iter()
+                .map(|&m| (emitters.geom[m as usize].normal - normal).length())
+                .fold(0.0, f64::max);
+            let member_cdf = cumulative(members.iter().map(|&m| emitters.geom[m as usize].area));
+            let member_radius = members
+                .iter()
+                .map(|&m| emitters.geom[m as usize].radius)
+                .fold(0.0, f64::max);
+            // Who is across each edge: the member owning its reverse.
+            let edge_of = |m: u32, i: usize| {
+                let c = emitters.geom[m as usize].corners;
+                (point_key(c[i]), point_key(c[(i + 1) % 3]))
+            };
+            let mut owner: HashMap<([u64; 3], [u64; 3]), u32> = HashMap::new();
+            let mut manifold = true;
+            for (local, &m) in members.iter().enumerate() {
+                for i in 0..3 {
+                    manifold &= owner.insert(edge_of(m, i), local as u32).is_none();
+                }
+            }
+            let neighbours: Vec<[u32; 3]> = members
+                .iter()
+                .map(|&m| {
+                    [0, 1, 2].map(|i| {
+                        let (a, b) = edge_of(m, i);
+                        owner.get(&(b, a)).copied().unwrap_or(NO_NEIGHBOUR)
+                    })
+                })
+                .collect();
+            EmitterGroup {
+                emission: emitters.emission[members[0] as usize],
+                member_radius,
+                neighbours,
+                manifold,
+                area,
+                member_cdf,
+                members,
+                boundary,
+                vertices,
+                normal,
+                centroid,
+                normal_spread,
+                thickness,
+                center,
+                radius,
+            }
+        })
+        .collect()
+}

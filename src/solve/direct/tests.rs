@@ -1,0 +1,145 @@
+mod tests {
+    use super::super::*;
+    use crate::mesh::build_patches;
+    use crate::scene::generated;
+    use crate::scene::Scene;
+
+    /// A 1 x 1 emitter (facing down, split into 4 x 4 x 2 triangles so it forms one group)
+    /// over receivers in every relation to it: below, tilted, cutting its plane, beside it in its
+    /// plane, above it (behind), touching its edge, and below it with their planes cutting it
+    /// (between its triangles' corners, one of them close).
+    fn grouped_scene() -> Scene {
+        let v = DVec3::new;
+        let light = [
+            [v(0.0, 1.0, 0.0), v(1.0, 1.0, 0.0), v(1.0, 1.0, 1.0)],
+            [v(0.0, 1.0, 0.0), v(1.0, 1.0, 1.0), v(0.0, 1.0, 1.0)],
+        ];
+        let mut corners: Vec<[DVec3; 3]> = Vec::new();
+        let light_scene = generated::subdivide(
+            &Scene::from_triangles(&light, &[[0.0; 3]; 2], &[[1.0; 3]; 2]),
+            4,
+        );
+        for t in 0..light_scene.len() {
+            corners.push(light_scene.corners(t));
+        }
+        let emitters = corners.len();
+        let receivers = [
+            [v(0.2, 0.0, 0.2), v(0.8, 0.0, 0.8), v(0.8, 0.0, 0.2)], // below, facing up
+            [v(-0.5, 0.2, 0.0), v(-0.5, 0.8, 1.0), v(-0.2, 0.0, 1.0)], // tilted, aside
+            [v(0.5, 0.5, 0.0), v(0.5, 1.5, 0.0), v(0.5, 0.5, 1.0)], // cuts the light's plane
+            [v(1.5, 1.0, 0.0), v(2.0, 1.0, 0.5), v(1.5, 1.0, 1.0)], // in its plane
+            [v(0.2, 1.5, 0.2), v(0.2, 1.5, 0.8), v(0.8, 1.5, 0.2)], // above (behind it)
+            [v(1.0, 1.0, 0.0), v(1.0, 0.0, 0.0), v(1.0, 1.0, 1.0)], // wall on its edge
+            [v(0.3, 0.0, 0.1), v(0.3, 0.9, 0.1), v(0.3, 0.0, 0.9)], // below, its plane cuts it
+            [v(0.62, 0.95, 0.0), v(0.62, 0.0, 1.0), v(0.62, 0.95, 1.0)], // near, cuts it
+        ];
+        corners.extend(receivers);
+        let n = corners.len();
+        let mut emission = vec![[0.0; 3]; n];
+        emission[..emitters].fill([1.0; 3]);
+        Scene::from_triangles(&corners, &vec![[0.5; 3]; n], &emission)
+    }
+
+    #[test]
+    fn groups_give_the_sum_of_their_members() {
+        let scene = grouped_scene();
+        let patches = build_patches(&scene, None);
+        let light = DirectLight::new(&patches, patches.len());
+        assert_eq!(light.group_count(), 1, "the split light is one group");
+        assert_eq!(
+            light.groups[0].boundary.len(),
+            4 * 4,
+            "the square's rim, 4 x 4 edges"
+        );
+        for p in 0..patches.len() {
+            let r = Element {
+                corners: patches.corners[p],
+                normal: patches.normal[p],
+                area: patches.area[p],
+                patch: p as u32,
+            };
+            let receiver = PatchGeom::new(r.corners, r.normal);
+            let grouped = light.unoccluded(&r, &mut Vec::new(), &mut Vec::new())[0];
+            let member_sum: f64 = (0..light.emitters.len())
+                .map(|k| light.emitter_form_factor(&r, &receiver, k))
+                .sum();
+            assert!(
+                (grouped - member_sum).abs() <= 1e-12 + 1e-9 * member_sum,
+                "patch {p}: grouped {grouped} vs members {member_sum}"
+            );
+        }
+    }
+}
+
+mod sampling_tests {
+    use super::super::*;
+    use crate::mesh::build_patches;
+    use crate::scene::Scene;
+
+    /// Reflected direct light of patch 0 (a unit receiver facing up at y = 0) in a scene of
+    /// `corners` with `emission`, albedo 0.5 everywhere.
+    fn direct_on_receiver(corners: &[[DVec3; 3]], emission: &[[f64; 3]]) -> f64 {
+        let scene = Scene::from_triangles(corners, &vec![[0.5; 3]; corners.len()], emission);
+        let patches = build_patches(&scene, None);
+        let receivers = patch_receivers(&patches);
+        let light = DirectLight::new(&patches, receivers.len());
+        let reflected = light.reflected(&receivers, &Progress::hidden());
+        let at = receivers.iter().position(|r| r.patch == 0).unwrap();
+        reflected[at][0]
+    }
+
+    /// A small light just above a receiver, and a light ten million times as powerful hidden
+    /// from it behind a plate: the hidden light must not change the receiver's direct light.
+    /// (Shadow rays chosen by the emitters' power all went to the hidden light, found it
+    /// blocked, and left the receiver dark: the bear lit by its own head was 11% off.)
+    #[test]
+    fn a_hidden_powerful_light_does_not_darken_a_receiver_lit_by_a_small_one() {
+        let v = DVec3::new;
+        let receiver = [v(0.0, 0.0, 0.0), v(0.0, 0.0, 1.0), v(1.0, 0.0, 0.0)];
+        let small = [v(0.3, 0.3, 0.3), v(0.4, 0.3, 0.3), v(0.3, 0.3, 0.4)];
+        let square = |y: f64, half: f64, down: bool| {
+            let (a, b, c, d) = (
+                v(-half, y, -half),
+                v(half, y, -half),
+                v(half, y, half),
+                v(-half, y, half),
+            );
+            if down {
+                [[a, b, c], [a, c, d]]
+            } else {
+                [[a, c, b], [a, d, c]]
+            }
+        };
+        let alone = direct_on_receiver(&[receiver, small], &[[0.0; 3], [1.0; 3]]);
+        let [h0, h1] = square(20.0, 50.0, true);
+        let [p0, p1] = square(10.0, 100.0, true);
+        let hidden = direct_on_receiver(
+            &[receiver, small, h0, h1, p0, p1],
+            &[[0.0; 3], [1.0; 3], [1.0; 3], [1.0; 3], [0.0; 3], [0.0; 3]],
+        );
+        assert!(alone > 0.0);
+        assert!(
+            (hidden - alone).abs() <= 0.05 * alone,
+            "with a hidden light {hidden}, without {alone}"
+        );
+    }
+}
+
+mod budget_tests {
+    use super::super::*;
+    use crate::mesh::build_patches;
+    use crate::scene::generated;
+
+    #[test]
+    fn direct_light_budget_counts_receivers_times_groups() {
+        let patches = build_patches(&generated::cornell_box(), None);
+        let direct = DirectLight::new(&patches, patches.len());
+        let groups = direct.group_count() as u64;
+        assert!(groups >= 1);
+        assert!(!direct.over_budget(patches.len()));
+        let limit = (DIRECT_LIGHT_BUDGET / groups).min(MAX_SHADOW_RAYS / MIN_SHADOW_SAMPLES as u64)
+            as usize;
+        assert!(!direct.over_budget(limit));
+        assert!(direct.over_budget(limit + 1));
+    }
+}
