@@ -61,3 +61,87 @@ impl Error {
 
 /// Result alias used across the crate.
 pub type Result<T> = std::result::Result<T, Error>;
+
+/// What a [`Warning`] is about.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum WarningKind {
+    /// A material file or a material is missing: the default albedo is used.
+    Material,
+    /// Triangles repeat earlier ones: each is solved once.
+    Duplicate,
+    /// Nothing emits: the answer is all zero.
+    NoEmitter,
+    /// A camera line of the scene file is malformed and ignored.
+    Camera,
+    /// The model was coarsened to fit the memory limit.
+    Memory,
+    /// The solve stopped at the iteration cap without converging.
+    IterationCap,
+    /// Exact direct light was asked for but skipped.
+    DirectLightSkipped,
+    /// Form-factor rows above 1 were capped.
+    CappedRows,
+    /// Much negative radiance (clamped or kept).
+    NegativeRadiance,
+    /// Radiance above the bound the emission and albedos allow.
+    OverBound,
+}
+
+/// A finding that does not stop the work (a missing material, a solve that hit its iteration
+/// cap, ...): one line, with the file and line it is about when there is one. It displays as
+/// `file:line: message`.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Warning {
+    /// What it is about.
+    pub kind: WarningKind,
+    /// What happened and what was done instead, one line.
+    pub message: String,
+    /// The file concerned, if any.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub file: Option<PathBuf>,
+    /// The 1-based line of `file` concerned, if known.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub line: Option<usize>,
+}
+
+impl Warning {
+    /// A warning about no file in particular.
+    pub fn new(kind: WarningKind, message: impl Into<String>) -> Warning {
+        Warning {
+            kind,
+            message: message.into(),
+            file: None,
+            line: None,
+        }
+    }
+
+    /// A warning about `file` (and its `line` when known).
+    pub fn in_file(
+        kind: WarningKind,
+        file: impl Into<PathBuf>,
+        line: Option<usize>,
+        message: impl Into<String>,
+    ) -> Warning {
+        Warning {
+            file: Some(file.into()),
+            line,
+            ..Warning::new(kind, message)
+        }
+    }
+
+    /// True when the displayed warning contains `text`.
+    pub fn contains(&self, text: &str) -> bool {
+        self.to_string().contains(text)
+    }
+}
+
+impl std::fmt::Display for Warning {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match (&self.file, self.line) {
+            (Some(file), Some(line)) => write!(f, "{}:{line}: {}", file.display(), self.message),
+            (Some(file), None) => write!(f, "{}: {}", file.display(), self.message),
+            _ => f.write_str(&self.message),
+        }
+    }
+}

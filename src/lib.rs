@@ -66,7 +66,7 @@ pub mod scene;
 pub mod solve;
 pub mod transport;
 
-pub use error::{Error, Result};
+pub use error::{Error, Result, Warning, WarningKind};
 
 use std::path::Path;
 
@@ -89,7 +89,7 @@ pub struct Solved {
     /// Radiance per patch and per input triangle, with the solve's statistics.
     pub solution: Solution,
     /// What did not fail but is less accurate than asked ([`solve::warnings::solve_warnings`]).
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Warning>,
 }
 
 /// Solves `scene` with the hierarchical solver: input triangles split so no edge is longer

@@ -53,7 +53,10 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {}", driver::one_line(&e.to_string()));
+            eprintln!(
+                "error: {}",
+                driver::one_line(&cli::flags::flagged(&e.to_string()))
+            );
             ExitCode::from(1)
         }
     }

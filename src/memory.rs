@@ -77,39 +77,6 @@ pub fn parse_status_field(text: &str, name: &str) -> Option<u64> {
     })
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn parses_kernel_format() {
-        let text =
-            "Name:\tantiradiance\nVmPeak:\t  300000 kB\nVmHWM:\t    2048 kB\nVmRSS:\t    1024 kB\n";
-        assert_eq!(parse_status_field(text, "VmHWM"), Some(2048 * 1024));
-        assert_eq!(parse_status_field(text, "VmRSS"), Some(1024 * 1024));
-        assert_eq!(parse_status_field(text, "VmSwap"), None);
-        assert_eq!(parse_status_field("VmHWM: x kB\n", "VmHWM"), None);
-        let meminfo = "MemTotal:       24576000 kB\nMemFree:         1000 kB\n";
-        assert_eq!(
-            parse_status_field(meminfo, "MemTotal"),
-            Some(24576000 * 1024)
-        );
-    }
-
-    #[test]
-    fn reads_own_process_on_linux() {
-        if cfg!(target_os = "linux") {
-            // Current first: other tests' threads may grow the process in between, and the
-            // peak read later is at least any resident size seen before it.
-            let now = current_rss_bytes().expect("VmRSS on Linux");
-            let peak = peak_rss_bytes().expect("VmHWM on Linux");
-            assert!(peak >= now && now > 0, "peak {peak} current {now}");
-        } else {
-            assert_eq!(peak_rss_bytes(), None);
-        }
-    }
-}
-
 /// Bytes as a short human figure (MB or GB).
 pub fn format_bytes(bytes: u64) -> String {
     let mb = bytes as f64 / (1024.0 * 1024.0);
@@ -228,7 +195,7 @@ impl Budget {
             String::new()
         };
         Error::Memory(format!(
-            "does not fit the memory limit of {} (--memory-limit): {what} reached an estimated {}{used}; {advice}",
+            "does not fit the memory limit of {} (SolverOptions::memory_limit_bytes): {what} reached an estimated {}{used}; {advice}",
             fmt(self.limit),
             fmt(with_slack(bytes)),
         ))
@@ -240,4 +207,37 @@ fn with_slack(bytes: u64) -> u64 {
     bytes
         .saturating_add(bytes / SLACK_DIVISOR)
         .saturating_add(SLACK_BYTES)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_kernel_format() {
+        let text =
+            "Name:\tantiradiance\nVmPeak:\t  300000 kB\nVmHWM:\t    2048 kB\nVmRSS:\t    1024 kB\n";
+        assert_eq!(parse_status_field(text, "VmHWM"), Some(2048 * 1024));
+        assert_eq!(parse_status_field(text, "VmRSS"), Some(1024 * 1024));
+        assert_eq!(parse_status_field(text, "VmSwap"), None);
+        assert_eq!(parse_status_field("VmHWM: x kB\n", "VmHWM"), None);
+        let meminfo = "MemTotal:       24576000 kB\nMemFree:         1000 kB\n";
+        assert_eq!(
+            parse_status_field(meminfo, "MemTotal"),
+            Some(24576000 * 1024)
+        );
+    }
+
+    #[test]
+    fn reads_own_process_on_linux() {
+        if cfg!(target_os = "linux") {
+            // Current first: other tests' threads may grow the process in between, and the
+            // peak read later is at least any resident size seen before it.
+            let now = current_rss_bytes().expect("VmRSS on Linux");
+            let peak = peak_rss_bytes().expect("VmHWM on Linux");
+            assert!(peak >= now && now > 0, "peak {peak} current {now}");
+        } else {
+            assert_eq!(peak_rss_bytes(), None);
+        }
+    }
 }

@@ -332,7 +332,7 @@ fn no_emitter_is_a_warning() {
     assert_eq!(scene.len(), 1);
     assert_eq!(scene.emitter_count(), 0);
     assert!(!scene.warnings.is_empty());
-    assert!(scene.warnings.iter().all(|w| !w.contains('\n')));
+    assert!(scene.warnings.iter().all(|w| !w.contains("\n")));
 }
 
 #[test]

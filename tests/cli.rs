@@ -641,7 +641,30 @@ fn warnings_go_to_stderr_and_the_solve_goes_on() {
     assert_eq!(rows.len(), TINY_TRIANGLES);
     assert!(rows[2].1 && rows[3].1, "the light emits");
     let r = read_json(&report);
-    assert!(!r["warnings"].as_array().unwrap().is_empty());
+    // The report lists each warning as its kind, message, file and line; the message names
+    // flags, as on stderr.
+    let warnings = r["warnings"].as_array().unwrap();
+    let material = warnings
+        .iter()
+        .find(|w| w["kind"] == "material")
+        .expect("the missing MTL file");
+    assert!(
+        material["message"].as_str().unwrap().contains("tiny.mtl"),
+        "{r}"
+    );
+    assert!(
+        material["message"].as_str().unwrap().contains("--albedo"),
+        "{r}"
+    );
+    assert!(
+        material["file"].as_str().unwrap().ends_with("tiny.obj"),
+        "{r}"
+    );
+    assert!(material["line"].as_u64().is_some(), "{r}");
+    assert!(
+        err.contains("warning: ") && err.contains("using --albedo"),
+        "{err}"
+    );
     assert_eq!(r["parameters"]["scene_options"]["emit_above"], 0.9);
     assert_eq!(r["parameters"]["scene_options"]["emission"], 2.0);
 }

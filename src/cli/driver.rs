@@ -24,7 +24,8 @@ use glam::DVec3;
 use serde::Serialize;
 use serde_json::{json, Map, Value};
 
-use antiradiance::error::{Error, Result};
+use crate::cli::flags::flagged;
+use antiradiance::error::{Error, Result, Warning};
 use antiradiance::memory;
 use antiradiance::memory::format_bytes;
 use antiradiance::mesh::{self, Patches};
@@ -391,34 +392,7 @@ pub struct CompareArgs {
 /// Checks a camera the way the renderer will (size, field of view, exposure, eye and target), so
 /// a bad picture option fails before the solve rather than after it.
 pub fn check_camera(camera: &CameraOptions) -> Result<()> {
-    if camera.width == 0 || camera.height == 0 || camera.width > 16384 || camera.height > 16384 {
-        return Err(Error::Parameter(format!(
-            "--width {} --height {}: the picture must be between 1x1 and 16384x16384 pixels",
-            camera.width, camera.height
-        )));
-    }
-    if !(camera.fov_deg.is_finite() && camera.fov_deg > 0.0 && camera.fov_deg < 180.0) {
-        return Err(Error::Parameter(format!(
-            "--fov {} must be in (0, 180) degrees",
-            camera.fov_deg
-        )));
-    }
-    if let Some(e) = camera.exposure {
-        if !(e.is_finite() && e > 0.0) {
-            return Err(Error::Parameter(format!(
-                "--exposure {e} must be finite and > 0"
-            )));
-        }
-    }
-    if let (Some(eye), Some(target)) = (camera.eye, camera.target) {
-        if eye == target {
-            return Err(Error::Parameter(format!(
-                "--eye and --target are the same point {},{},{}",
-                eye.x, eye.y, eye.z
-            )));
-        }
-    }
-    Ok(())
+    camera.validate()
 }
 
 /// Checks output paths before any work: each must name a file in an existing directory, must
@@ -513,7 +487,7 @@ pub fn load(args: &SceneArgs, timings: &mut Timings) -> Result<Loaded> {
         scene::load_obj(&args.scene, &args.options())
     })?;
     for w in &scene.warnings {
-        eprintln!("warning: {}", one_line(w));
+        print_warning(w);
     }
     let count = patch_count(&scene, args.max_edge);
     if count > MAX_PATCHES && count > scene.len() as u64 {
@@ -620,18 +594,26 @@ impl Report {
             .insert("command", command)
             .insert("scene", scene_path.display().to_string())
             .insert("counts", Counts::of(loaded))
-            .insert("warnings", &loaded.scene.warnings);
+            .insert("warnings", Value::Array(Vec::new()));
+        report.add_warnings(loaded.scene.warnings.iter().cloned());
         report
     }
 
-    /// Appends warnings of the run (iteration cap, ...) to the scene's in `warnings`.
-    pub fn add_warnings(&mut self, warnings: impl IntoIterator<Item = String>) -> &mut Report {
+    /// Appends warnings of the run (iteration cap, ...) to the scene's in `warnings`, each as
+    /// `{kind, message, file, line}` (file and line when known) with the message naming flags.
+    pub fn add_warnings(&mut self, warnings: impl IntoIterator<Item = Warning>) -> &mut Report {
         let list = self
             .fields
             .entry("warnings")
             .or_insert_with(|| Value::Array(Vec::new()));
         if let Value::Array(list) = list {
-            list.extend(warnings.into_iter().map(Value::String));
+            list.extend(warnings.into_iter().map(|w| {
+                let w = Warning {
+                    message: one_line(&flagged(&w.message)),
+                    ..w
+                };
+                serde_json::to_value(&w).unwrap_or(Value::Null)
+            }));
         }
         self
     }
@@ -732,7 +714,7 @@ pub fn solve(args: &SolveArgs) -> Result<()> {
     })?;
     let cap = solve_warnings(args.solver, &solution.stats, &options, &loaded.patches);
     for w in &cap {
-        eprintln!("warning: {w}");
+        print_warning(&w);
     }
     // A failed solve writes no result (picture, PLY, CSV); its report says why.
     let failed = solution.stats.check(args.solver.name());
@@ -892,7 +874,7 @@ pub fn compare(args: &CompareArgs) -> Result<()> {
         let solution = solution?;
         timings.solve += seconds;
         for w in solve_warnings(kind, &solution.stats, &options, &loaded.patches) {
-            eprintln!("warning: {w}");
+            print_warning(&w);
             cap_warnings.push(w);
         }
         // A failed solve makes the comparison meaningless: no table, no report.
@@ -983,6 +965,11 @@ pub fn compare(args: &CompareArgs) -> Result<()> {
 
 // ---------------------------------------------------------------------------------------------
 // Human-readable text
+
+/// Prints `warning: ...` on stderr: the warning on one line, naming flags.
+pub fn print_warning(w: &Warning) {
+    eprintln!("warning: {}", one_line(&flagged(&w.to_string())));
+}
 
 /// A message on one line (line breaks become spaces).
 pub fn one_line(text: &str) -> String {

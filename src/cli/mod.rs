@@ -2,6 +2,7 @@
 //! A client of the library like any other; built only with the `cli` feature.
 
 pub mod driver;
+pub mod flags;
 pub mod relight;
 pub mod scene;
 pub mod sweep;

@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 
 use clap::{Args, Subcommand};
 
-use crate::cli::driver::{check_outputs, one_line};
+use crate::cli::driver::check_outputs;
 use antiradiance::error::{Error, Result};
 use antiradiance::mesh::MAX_PATCHES;
 use antiradiance::scene::generated;
@@ -311,7 +311,7 @@ fn variant(a: &VariantArgs) -> Result<()> {
         .iter()
         .filter(|w| !w.contains("no emitting triangle"))
     {
-        eprintln!("warning: {}", one_line(w));
+        crate::cli::driver::print_warning(w);
     }
     // The output's MTL file must not replace one the mesh reads.
     let out_mtl = out.with_extension("mtl");
@@ -406,7 +406,7 @@ fn load_mesh(args: &MeshArgs) -> Result<Scene> {
         .iter()
         .filter(|w| !w.contains("no emitting triangle"))
     {
-        eprintln!("warning: {}", one_line(w));
+        crate::cli::driver::print_warning(w);
     }
     Ok(object)
 }

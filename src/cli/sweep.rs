@@ -21,6 +21,7 @@ use clap::{Args, ValueEnum};
 use plotters::prelude::*;
 
 use crate::cli::driver::{self, Loaded, SceneArgs, Timings};
+use crate::cli::flags::flagged;
 use antiradiance::error::{Error, Result};
 use antiradiance::output::{self, format_f64};
 use antiradiance::reference::ReferenceOptions;
@@ -556,7 +557,12 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
                 if let Some(w) =
                     antiradiance::solve::warnings::memory_warning(solution.stats.memory.as_ref())
                 {
-                    eprintln!("warning: run {}/{}: {w}", i + 1, runs.len());
+                    eprintln!(
+                        "warning: run {}/{}: {}",
+                        i + 1,
+                        runs.len(),
+                        flagged(&w.to_string())
+                    );
                 }
             }
             let cpu_seconds = cpu_seconds_between(cpu_before, process_cpu_ticks());
@@ -574,7 +580,12 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
             let s = &solution.stats;
             // A failed run stays in the table (converged 0) and off the Pareto front.
             if let Err(e) = s.check(args.solver.name()) {
-                eprintln!("warning: run {}/{}: {e}", i + 1, total);
+                eprintln!(
+                    "warning: run {}/{}: {}",
+                    i + 1,
+                    total,
+                    flagged(&e.to_string())
+                );
             }
             let result = RunResult {
                 spec: spec.clone(),

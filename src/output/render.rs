@@ -90,6 +90,53 @@ impl Default for CameraOptions {
     }
 }
 
+impl CameraOptions {
+    /// Checks the camera before anything is rendered: a size from 1x1 to 16384x16384, a field
+    /// of view in (0, 180) degrees, a finite positive exposure, finite eye and target apart
+    /// from each other. The one camera check: the command line calls it before solving.
+    pub fn validate(&self) -> Result<()> {
+        let camera = self;
+        if camera.width == 0 || camera.height == 0 || camera.width > 16384 || camera.height > 16384
+        {
+            return Err(Error::Parameter(format!(
+                "CameraOptions::width {} CameraOptions::height {}: the picture must be between 1x1 and 16384x16384 pixels",
+                camera.width, camera.height
+            )));
+        }
+        if !(camera.fov_deg.is_finite() && camera.fov_deg > 0.0 && camera.fov_deg < 180.0) {
+            return Err(Error::Parameter(format!(
+                "CameraOptions::fov_deg {} must be in (0, 180) degrees",
+                camera.fov_deg
+            )));
+        }
+        if let Some(e) = camera.exposure {
+            if !(e.is_finite() && e > 0.0) {
+                return Err(Error::Parameter(format!(
+                    "CameraOptions::exposure {e} must be finite and > 0"
+                )));
+            }
+        }
+        for (name, p) in [("eye", camera.eye), ("target", camera.target)] {
+            if let Some(p) = p {
+                if !p.is_finite() {
+                    return Err(Error::Parameter(format!(
+                        "CameraOptions::{name} {p} is not finite"
+                    )));
+                }
+            }
+        }
+        if let (Some(eye), Some(target)) = (camera.eye, camera.target) {
+            if eye == target {
+                return Err(Error::Parameter(format!(
+                    "CameraOptions::eye and CameraOptions::target are the same point {},{},{}",
+                    eye.x, eye.y, eye.z
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
 /// How the front side of a patch is coloured.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Shading {
@@ -694,44 +741,6 @@ fn frame_exposure(patches: &Patches, frame: &Frame) -> f64 {
         .unwrap_or(1.0)
 }
 
-/// Checks the camera parameters that [`render_rgb`] would silently repair.
-fn validate(camera: &CameraOptions) -> Result<()> {
-    if camera.width == 0 || camera.height == 0 || camera.width > 16384 || camera.height > 16384 {
-        return Err(Error::Parameter(format!(
-            "image size {}x{} must be between 1x1 and 16384x16384",
-            camera.width, camera.height
-        )));
-    }
-    if !(camera.fov_deg.is_finite() && camera.fov_deg > 0.0 && camera.fov_deg < 180.0) {
-        return Err(Error::Parameter(format!(
-            "field of view {} degrees must be in (0, 180)",
-            camera.fov_deg
-        )));
-    }
-    if let Some(e) = camera.exposure {
-        if !(e.is_finite() && e > 0.0) {
-            return Err(Error::Parameter(format!(
-                "exposure {e} must be finite and > 0"
-            )));
-        }
-    }
-    for (name, p) in [("eye", camera.eye), ("target", camera.target)] {
-        if let Some(p) = p {
-            if !p.is_finite() {
-                return Err(Error::Parameter(format!("camera {name} {p} is not finite")));
-            }
-        }
-    }
-    if let (Some(eye), Some(target)) = (camera.eye, camera.target) {
-        if eye == target {
-            return Err(Error::Parameter(format!(
-                "camera eye and target are the same point {eye}"
-            )));
-        }
-    }
-    Ok(())
-}
-
 /// Renders with flat shading and writes an 8-bit RGB PNG (sRGB chunk set) atomically.
 ///
 /// Errors: an [`Error::Parameter`] for a size outside 1..=16384, a field of view outside
@@ -754,7 +763,7 @@ pub fn render_png_shaded(
     camera: &CameraOptions,
     shading: Shading,
 ) -> Result<()> {
-    validate(camera)?;
+    camera.validate()?;
     let rgb = render_rgb_shaded(patches, solution, camera, shading);
     write_atomic(path, |w| {
         let mut encoder = png::Encoder::new(w, camera.width, camera.height);

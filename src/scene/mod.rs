@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 
 use glam::DVec3;
 
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, Warning, WarningKind};
 
 /// Largest number of patches a `max_edge` may split a scene into (and most triangles a generated scene may have) (a guard against a typo such
 /// as a length in the wrong unit, which would otherwise exhaust memory before any message; a
@@ -47,19 +47,21 @@ impl SceneOptions {
     pub fn validate(&self) -> Result<()> {
         if !(self.default_albedo.is_finite() && (0.0..1.0).contains(&self.default_albedo)) {
             return Err(Error::Parameter(format!(
-                "--albedo {} is outside [0, 1)",
+                "SceneOptions::default_albedo {} is outside [0, 1)",
                 self.default_albedo
             )));
         }
         if !(self.emission.is_finite() && self.emission >= 0.0) {
             return Err(Error::Parameter(format!(
-                "--emission {} must be finite and >= 0",
+                "SceneOptions::emission {} must be finite and >= 0",
                 self.emission
             )));
         }
         if let Some(y) = self.emit_above {
             if !y.is_finite() {
-                return Err(Error::Parameter(format!("--emit-above {y} must be finite")));
+                return Err(Error::Parameter(format!(
+                    "SceneOptions::emit_above {y} must be finite"
+                )));
             }
         }
         Ok(())
@@ -88,7 +90,7 @@ pub struct Scene {
     /// lists them; empty for scenes built in code.
     pub material_names: Vec<String>,
     /// Non-fatal findings (missing MTL, no emitter, ...), one line each.
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Warning>,
     /// The camera the scene was published with, if its file names one (a comment line
     /// `# camera eye X Y Z target X Y Z fov DEG`, see [`SceneCamera::parse`]); a picture of the
     /// scene uses it unless told otherwise.
@@ -407,11 +409,14 @@ pub fn load_obj(path: &Path, options: &SceneOptions) -> Result<Scene> {
                 }
                 Err(e) => {
                     mtl_missing = true;
-                    warnings.push(format!(
-                        "{}:{}: material file {} cannot be read ({e}); using --albedo for its materials",
-                        path.display(),
-                        line,
-                        mtl_path.display()
+                    warnings.push(Warning::in_file(
+                        WarningKind::Material,
+                        path,
+                        Some(*line),
+                        format!(
+                            "material file {} cannot be read ({e}); using SceneOptions::default_albedo for its materials",
+                            mtl_path.display()
+                        ),
                     ))
                 }
             }
@@ -421,11 +426,13 @@ pub fn load_obj(path: &Path, options: &SceneOptions) -> Result<Scene> {
         let mut reported = std::collections::HashSet::new();
         for (line, name) in &obj_scan.usemtls {
             if !defined.contains(name) && reported.insert(name.as_str()) {
-                warnings.push(format!(
-                    "{}:{}: material '{}' is not defined in any material file; using --albedo",
-                    path.display(),
-                    line,
-                    name
+                warnings.push(Warning::in_file(
+                    WarningKind::Material,
+                    path,
+                    Some(*line),
+                    format!(
+                        "material '{name}' is not defined in any material file; using SceneOptions::default_albedo"
+                    ),
                 ));
             }
         }
@@ -468,7 +475,12 @@ pub fn load_obj(path: &Path, options: &SceneOptions) -> Result<Scene> {
     for (i, raw) in text.lines().enumerate() {
         match SceneCamera::parse(raw) {
             Some(Ok(camera)) => scene.camera = Some(camera),
-            Some(Err(message)) => warnings.push(format!("{}:{}: {message}", path.display(), i + 1)),
+            Some(Err(message)) => warnings.push(Warning::in_file(
+                WarningKind::Camera,
+                path,
+                Some(i + 1),
+                message,
+            )),
             None => {}
         }
     }
@@ -545,17 +557,18 @@ pub fn load_obj(path: &Path, options: &SceneOptions) -> Result<Scene> {
                     || scene.emission[t] != scene.emission[u as usize]
             })
         });
-        warnings.push(format!(
-            "{}: {} an earlier triangle (same corners, same orientation; first: triangle {t} repeats {twin}); each is solved once and reported with its first copy's radiance{}",
-            path.display(),
+        warnings.push(Warning::in_file(WarningKind::Duplicate, path, None, format!(
+            "{} an earlier triangle (same corners, same orientation; first: triangle {t} repeats {twin}); each is solved once and reported with its first copy's radiance{}",
             if count == 1 { "1 triangle repeats".to_string() } else { format!("{count} triangles repeat") },
             if differ { " (some copies have other materials: the first copy's material is used)" } else { "" }
-        ));
+        )));
     }
     if scene.emitter_count() == 0 {
-        warnings.push(format!(
-            "{}: no emitting triangle (no Ke in materials, no --emit-above match); the answer is all zero",
-            path.display()
+        warnings.push(Warning::in_file(
+            WarningKind::NoEmitter,
+            path,
+            None,
+            "no emitting triangle (no Ke in materials, no SceneOptions::emit_above match); the answer is all zero",
         ));
     }
     scene.warnings = warnings;

@@ -249,7 +249,7 @@ pub fn resolve_amount(kind: VariantKind, amount: Option<f64>) -> Result<Option<f
             Ok(Some(a))
         } else {
             Err(Error::Parameter(format!(
-                "--amount {a} ({what}) must be a whole number in {lo}..={hi}"
+                "VariantOptions::amount {a} ({what}) must be a whole number in {lo}..={hi}"
             )))
         }
     };
@@ -257,7 +257,9 @@ pub fn resolve_amount(kind: VariantKind, amount: Option<f64>) -> Result<Option<f
         if ok {
             Ok(Some(a))
         } else {
-            Err(Error::Parameter(format!("--amount {a} ({what})")))
+            Err(Error::Parameter(format!(
+                "VariantOptions::amount {a} ({what})"
+            )))
         }
     };
     match kind {
@@ -269,7 +271,7 @@ pub fn resolve_amount(kind: VariantKind, amount: Option<f64>) -> Result<Option<f
         ),
         VariantKind::Translate => check(a.is_finite(), "translation: must be finite"),
         VariantKind::Twins => Err(Error::Parameter(format!(
-            "--amount {a} does not apply to the twins variant"
+            "VariantOptions::amount {a} does not apply to the twins variant"
         ))),
         VariantKind::Tjunction => check(
             a.is_finite() && a > 0.0 && a <= 1.0,
@@ -347,7 +349,7 @@ pub fn make_variant(scene: &Scene, kind: VariantKind, options: &VariantOptions) 
     let too_many = |count: u64| -> Result<()> {
         if count > MAX_PATCHES {
             Err(Error::Parameter(format!(
-                "the {} variant would have {count} triangles (at most {MAX_PATCHES}); choose a smaller --amount",
+                "the {} variant would have {count} triangles (at most {MAX_PATCHES}); choose a smaller VariantOptions::amount",
                 kind.name()
             )))
         } else {
@@ -419,7 +421,7 @@ pub fn make_variant(scene: &Scene, kind: VariantKind, options: &VariantOptions) 
         .position(|t| !t.iter().all(|p| p.is_finite()))
     {
         return Err(Error::Parameter(format!(
-            "the {} variant's triangle {t} has a non-finite vertex (--amount {a} too large)",
+            "the {} variant's triangle {t} has a non-finite vertex (VariantOptions::amount {a} too large)",
             kind.name()
         )));
     }

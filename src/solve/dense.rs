@@ -15,6 +15,7 @@ use crate::geometry::bins::Bins;
 use crate::mesh::Patches;
 use crate::progress::Progress;
 use crate::solve::budget::{self, Budget, MemoryStats};
+use crate::solve::convergence::end_sweep;
 use crate::solve::health::{self, Guard};
 use crate::solve::hierarchical::model;
 use crate::solve::solution::{Solution, SolveStats};
@@ -59,7 +60,7 @@ pub fn solve_dense(
                 options.bins
             ),
             bytes,
-            "use the hierarchical solver (--solver hierarchical) or raise --memory-limit",
+            "use the hierarchical solver (SolverKind::Hierarchical) or raise SolverOptions::memory_limit_bytes",
         )
     };
     if !budget.fits(estimate) {
@@ -244,16 +245,18 @@ pub fn solve_dense(
         let change = change_ratio(num, den);
         std::mem::swap(&mut radiance, &mut next_radiance);
         std::mem::swap(&mut anti, &mut next_anti);
-        stats.iterations = iteration;
-        progress.inc(1);
-        progress.message(format!("residual {change:.2e}"));
-        if let Some(failure) = guard.sweep(iteration, change, num, largest, finite) {
-            convergence.residual = change;
-            stats.failure = Some(failure);
-            break;
-        }
-        if convergence.sweep_done(iteration, change, options.tol) {
-            stats.converged = true;
+        if end_sweep(
+            iteration,
+            change,
+            num,
+            largest,
+            finite,
+            options.tol,
+            &mut guard,
+            &mut convergence,
+            &mut stats,
+            progress,
+        ) {
             break;
         }
     }

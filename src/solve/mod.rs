@@ -5,6 +5,7 @@
 
 pub mod accelerate;
 pub mod budget;
+pub mod convergence;
 pub mod dense;
 pub mod direct;
 pub mod health;
@@ -14,7 +15,9 @@ pub mod relight;
 pub mod solution;
 pub mod warnings;
 
+pub use convergence::{change_ratio, change_sums, relative_change, Convergence, MIN_SWEEPS};
 pub use options::*;
+pub use solution::{emission_bound, finish, source_and_albedo_max};
 
 use serde::Serialize;
 

@@ -1,13 +1,9 @@
-//! Solver parameters shared by the dense and hierarchical solvers, with named presets, and the
-//! pieces of the iteration they share (residuals, convergence, finishing a solution).
+//! Solver parameters shared by the dense and hierarchical solvers, with the named presets.
 
 use serde::Serialize;
 
 use crate::error::{Error, Result};
 use crate::hierarchy::links::LinkParams;
-use crate::mesh::Patches;
-use crate::solve::health::{self, FailureKind, SolveFailure};
-use crate::solve::solution::{sanitize, Solution, SolveStats};
 use crate::solve::Preset;
 use crate::transport::CouplingParams;
 
@@ -147,19 +143,19 @@ impl SolverOptions {
     pub fn validate(&self) -> Result<()> {
         if !(1..=64).contains(&self.bins) {
             return Err(Error::Parameter(format!(
-                "--bins {} outside 1..=64",
+                "SolverOptions::bins {} outside 1..=64",
                 self.bins
             )));
         }
         if !(self.tol > 0.0 && self.tol < 1.0) {
             return Err(Error::Parameter(format!(
-                "--tol {} outside (0, 1)",
+                "SolverOptions::tol {} outside (0, 1)",
                 self.tol
             )));
         }
         if self.max_iterations == 0 {
             return Err(Error::Parameter(
-                "--max-iterations must be at least 1".into(),
+                "SolverOptions::max_iterations must be at least 1".into(),
             ));
         }
         if !(1..=16).contains(&self.near_quadrature) {
@@ -170,18 +166,18 @@ impl SolverOptions {
         }
         if !(self.epsilon >= 0.0 && self.epsilon.is_finite()) {
             return Err(Error::Parameter(format!(
-                "--epsilon {} must be >= 0",
+                "SolverOptions::epsilon {} must be >= 0",
                 self.epsilon
             )));
         }
         if self.memory_limit_bytes == Some(0) {
             return Err(Error::Parameter(
-                "--memory-limit must be at least 1 byte".into(),
+                "SolverOptions::memory_limit_bytes must be at least 1 byte".into(),
             ));
         }
         if self.split_depth > 8 {
             return Err(Error::Parameter(format!(
-                "--split-depth {} outside 0..=8",
+                "SolverOptions::split_depth {} outside 0..=8",
                 self.split_depth
             )));
         }
@@ -196,248 +192,4 @@ impl SolverOptions {
             ..CouplingParams::default()
         }
     }
-}
-
-/// Tracks residuals across iterations and decides convergence.
-///
-/// The residual r_k = |B_k - B_(k-1)| / |B_k| underestimates the remaining error when the
-/// iteration contracts slowly (albedo near 1): the remaining error is about r_k q / (1 - q) with
-/// q the contraction ratio r_k / r_(k-1). Convergence is declared on that estimate.
-#[derive(Clone, Debug, Default)]
-pub struct Convergence {
-    previous: Option<f64>,
-    /// Contraction ratios of the last sweeps, newest last.
-    ratios: Vec<f64>,
-    /// Sweeps since the last extrapolation.
-    since_extrapolation: usize,
-    /// The contraction ratio at the last extrapolation: the error estimate of the sweep right
-    /// after a jump uses it (that sweep's own ratio measures the jump, not the iteration).
-    q_at_jump: Option<f64>,
-    /// Last residual seen.
-    pub residual: f64,
-    /// Last estimate of the remaining relative error.
-    pub error_estimate: f64,
-    /// When set, the contraction ratio used for the error estimate is at least this (an
-    /// accelerated iteration's residual ratios understate the plain iteration's, which is what
-    /// turns a residual into an error: e = (I - T)^-1 f). The largest albedo bounds it.
-    pub contraction_bound: Option<f64>,
-}
-
-impl Convergence {
-    /// Records a residual; returns true when the estimated remaining error is under `tol`.
-    pub fn update(&mut self, residual: f64, tol: f64) -> bool {
-        self.residual = residual;
-        let q = match self.previous {
-            Some(p) if p > 0.0 => (residual / p).min(0.9999),
-            _ => self.q_at_jump.unwrap_or(0.9),
-        };
-        if self.previous.is_some() {
-            self.ratios.push(q);
-        }
-        self.since_extrapolation += 1;
-        self.previous = Some(residual);
-        let q = q.max(self.contraction_bound.unwrap_or(0.0)).min(0.9999);
-        self.error_estimate = if residual == 0.0 {
-            0.0
-        } else {
-            residual * q.max(0.0) / (1.0 - q.max(0.0)) + residual
-        };
-        self.error_estimate < tol
-    }
-
-    /// Records the residual of sweep `iteration` (1-based); true when the solve should stop:
-    /// the estimated remaining error is under `tol` and at least [`MIN_SWEEPS`] sweeps ran (the
-    /// first ones only propagate emission: light must bounce once and antiradiance must have had
-    /// a sweep to cancel it).
-    pub fn sweep_done(&mut self, iteration: usize, residual: f64, tol: f64) -> bool {
-        self.update(residual, tol) && iteration >= MIN_SWEEPS
-    }
-}
-
-impl Convergence {
-    /// The factor `q / (1 - q)` by which to extrapolate the last sweep's change (`x += k (x_k -
-    /// x_(k-1))`, the geometric tail of a linear iteration contracting by `q`), when the
-    /// contraction ratio has settled: the last three ratios agree within 2% and lie in (0.05,
-    /// 0.9999), and three sweeps have passed since the last extrapolation. `None` otherwise.
-    ///
-    /// The tail of a Jacobi iteration is dominated by one slowly decaying mode (for a closed
-    /// room, the overall light level), so one extrapolation removes most of what many sweeps
-    /// would: at albedo 0.75, about half the sweeps; near albedo 1, nearly all of them.
-    pub fn extrapolation_factor(&mut self) -> Option<f64> {
-        if self.since_extrapolation < 3 || self.ratios.len() < 3 {
-            return None;
-        }
-        let last = &self.ratios[self.ratios.len() - 3..];
-        let q = last[2];
-        let settled = last.iter().all(|r| (r - q).abs() <= 0.02 * q);
-        if !(settled && q > 0.05 && q < 0.9999) {
-            return None;
-        }
-        self.since_extrapolation = 0;
-        // The change right after a jump is not a contraction ratio of the plain iteration.
-        self.previous = None;
-        self.q_at_jump = Some(q);
-        self.ratios.clear();
-        Some(q / (1.0 - q))
-    }
-}
-
-/// Fewest sweeps before convergence may be declared.
-pub const MIN_SWEEPS: usize = 3;
-
-/// Area-weighted relative L1 change between two radiance vectors (NaN when the new vector is
-/// not finite, never 0 for a change that overflowed).
-pub fn relative_change(patches: &Patches, old: &[[f64; 3]], new: &[[f64; 3]]) -> f64 {
-    let (num, den) = change_sums(patches, old, new);
-    change_ratio(num, den)
-}
-
-/// The area-weighted L1 norms `(sum a |new - old|, sum a |new|)` over patches and RGB channels.
-pub fn change_sums(patches: &Patches, old: &[[f64; 3]], new: &[[f64; 3]]) -> (f64, f64) {
-    let mut num = 0.0;
-    let mut den = 0.0;
-    for p in 0..patches.len() {
-        let a = patches.area[p];
-        for c in 0..3 {
-            num += a * (new[p][c] - old[p][c]).abs();
-            den += a * new[p][c].abs();
-        }
-    }
-    (num, den)
-}
-
-/// The relative change `num / den`: 0 when nothing is lit (`den == 0`), NaN when either sum is
-/// not finite (an overflowed sweep must not read as "no change").
-pub fn change_ratio(num: f64, den: f64) -> f64 {
-    if !(num.is_finite() && den.is_finite()) {
-        f64::NAN
-    } else if den > 0.0 {
-        num / den
-    } else {
-        0.0
-    }
-}
-
-/// The bound [`health::radiance_bound`] of the patches' own emission and albedos (normalized
-/// units), for the [`finish`] of a solve of that emission with antiradiance (`antiradiance`
-/// true; `None` otherwise: unoccluded radiosity has no such bound).
-pub fn emission_bound(patches: &Patches, antiradiance: bool) -> Option<f64> {
-    let (e_max, rho_max) = source_and_albedo_max(patches);
-    antiradiance.then(|| health::radiance_bound(e_max, rho_max))
-}
-
-/// The largest source radiance (any channel, absolute) and the largest albedo over the active
-/// patches, the two figures of the bound [`health::radiance_bound`].
-pub fn source_and_albedo_max(patches: &Patches) -> (f64, f64) {
-    let mut e_max = 0.0f64;
-    let mut rho_max = 0.0f64;
-    for p in (0..patches.len()).filter(|&p| patches.active[p]) {
-        for c in 0..3 {
-            e_max = e_max.max(patches.emission[p][c].abs());
-            rho_max = rho_max.max(patches.albedo[p][c]);
-        }
-    }
-    (e_max, rho_max)
-}
-
-/// Turns normalized per-patch radiance into a [`Solution`]: measures and optionally clamps
-/// negative radiance, checks the result's health, removes non-finite values, scales back to the
-/// scene's units.
-///
-/// The checks ([`crate::solve::health`]): a NaN or infinity among the active patches, a largest |B|
-/// above 1 + [`health::BOUND_SLACK`] times `bound` (in the patches' normalized units: the
-/// bound [`health::radiance_bound`] of the solve's source; `None` where none holds, as for
-/// unoccluded radiosity) and negative mass above [`health::NEGATIVE_LIMIT`] of the positive
-/// each set `stats.failure` (unless a failure is already there) and so `converged = false`.
-/// The figures (`largest_b_over_bound`, `radiance_bound`, `negative_fraction`) are set either
-/// way.
-pub fn finish(
-    patches: &Patches,
-    mut radiance: Vec<[f64; 3]>,
-    mut stats: SolveStats,
-    clamp_negative: bool,
-    bound: Option<f64>,
-) -> Solution {
-    let bound = bound.unwrap_or(0.0);
-    let mut largest = 0.0f64;
-    let mut finite = true;
-    for (p, b) in radiance.iter().enumerate() {
-        if patches.active[p] {
-            for &x in b {
-                finite &= x.is_finite();
-                if x.is_finite() {
-                    largest = largest.max(x.abs());
-                }
-            }
-        }
-    }
-    let mut negative = 0.0;
-    let mut positive = 0.0;
-    let mut negative_patches = 0;
-    for (p, b) in radiance.iter_mut().enumerate() {
-        let a = patches.area[p];
-        let mut neg = false;
-        for x in b.iter_mut() {
-            *x = sanitize(*x);
-            if *x < 0.0 {
-                negative += a * -*x;
-                neg = true;
-                if clamp_negative {
-                    *x = 0.0;
-                }
-            } else {
-                positive += a * *x;
-            }
-        }
-        negative_patches += neg as usize;
-    }
-    stats.negative_fraction = if positive > 0.0 {
-        negative / positive
-    } else {
-        0.0
-    };
-    stats.negative_patches = negative_patches;
-    let checked = bound > 0.0 && bound.is_finite();
-    let ratio = if checked { largest / bound } else { 0.0 };
-    stats.largest_b_over_bound = ratio;
-    stats.radiance_bound = if checked {
-        sanitize(bound * patches.emission_scale)
-    } else {
-        0.0
-    };
-    let new_failure = stats.failure.is_none();
-    if new_failure {
-        let kind = if !finite {
-            Some(FailureKind::NonFinite)
-        } else if ratio > 1.0 + health::BOUND_SLACK {
-            Some(FailureKind::OverBound)
-        } else if stats.negative_fraction > health::NEGATIVE_LIMIT {
-            Some(FailureKind::NegativeMass)
-        } else {
-            None
-        };
-        stats.failure = kind.map(|kind| SolveFailure {
-            kind,
-            sweep: stats.iterations,
-            in_result: true,
-            residual: stats.residual,
-            change_over_min: 0.0,
-            growing_sweeps: 0,
-            largest_b_over_bound: ratio,
-            bound: 0.0,
-            negative_fraction: 0.0,
-            max_row_sum: 0.0,
-        });
-    }
-    if let Some(f) = stats.failure.as_mut() {
-        // A failure found here is against this call's bound; one found before (during the
-        // sweeps, or by the inner solve of exact direct light) keeps the bound it was found with.
-        if new_failure {
-            f.bound = stats.radiance_bound;
-        }
-        f.max_row_sum = stats.max_row_sum;
-        f.negative_fraction = stats.negative_fraction;
-        stats.converged = false;
-    }
-    Solution::from_normalized(patches, &radiance, stats)
 }

@@ -4,6 +4,7 @@ use serde::Serialize;
 
 pub use crate::geometry::sanitize;
 use crate::mesh::Patches;
+use crate::solve::health::{self, FailureKind, SolveFailure};
 
 /// Convergence and health figures of one solve.
 #[derive(Clone, Debug, Default, Serialize)]
@@ -234,4 +235,128 @@ pub fn error_against(scene: &crate::scene::Scene, estimate: &Solution, truth: &S
         &estimate.triangle_radiance,
         &truth.triangle_radiance,
     )
+}
+
+/// The bound [`health::radiance_bound`] of the patches' own emission and albedos (normalized
+/// units), for the [`finish`] of a solve of that emission with antiradiance (`antiradiance`
+/// true; `None` otherwise: unoccluded radiosity has no such bound).
+pub fn emission_bound(patches: &Patches, antiradiance: bool) -> Option<f64> {
+    let (e_max, rho_max) = source_and_albedo_max(patches);
+    antiradiance.then(|| health::radiance_bound(e_max, rho_max))
+}
+
+/// The largest source radiance (any channel, absolute) and the largest albedo over the active
+/// patches, the two figures of the bound [`health::radiance_bound`].
+pub fn source_and_albedo_max(patches: &Patches) -> (f64, f64) {
+    let mut e_max = 0.0f64;
+    let mut rho_max = 0.0f64;
+    for p in (0..patches.len()).filter(|&p| patches.active[p]) {
+        for c in 0..3 {
+            e_max = e_max.max(patches.emission[p][c].abs());
+            rho_max = rho_max.max(patches.albedo[p][c]);
+        }
+    }
+    (e_max, rho_max)
+}
+
+/// Turns normalized per-patch radiance into a [`Solution`]: measures and optionally clamps
+/// negative radiance, checks the result's health, removes non-finite values, scales back to the
+/// scene's units.
+///
+/// The checks ([`crate::solve::health`]): a NaN or infinity among the active patches, a largest |B|
+/// above 1 + [`health::BOUND_SLACK`] times `bound` (in the patches' normalized units: the
+/// bound [`health::radiance_bound`] of the solve's source; `None` where none holds, as for
+/// unoccluded radiosity) and negative mass above [`health::NEGATIVE_LIMIT`] of the positive
+/// each set `stats.failure` (unless a failure is already there) and so `converged = false`.
+/// The figures (`largest_b_over_bound`, `radiance_bound`, `negative_fraction`) are set either
+/// way.
+pub fn finish(
+    patches: &Patches,
+    mut radiance: Vec<[f64; 3]>,
+    mut stats: SolveStats,
+    clamp_negative: bool,
+    bound: Option<f64>,
+) -> Solution {
+    let bound = bound.unwrap_or(0.0);
+    let mut largest = 0.0f64;
+    let mut finite = true;
+    for (p, b) in radiance.iter().enumerate() {
+        if patches.active[p] {
+            for &x in b {
+                finite &= x.is_finite();
+                if x.is_finite() {
+                    largest = largest.max(x.abs());
+                }
+            }
+        }
+    }
+    let mut negative = 0.0;
+    let mut positive = 0.0;
+    let mut negative_patches = 0;
+    for (p, b) in radiance.iter_mut().enumerate() {
+        let a = patches.area[p];
+        let mut neg = false;
+        for x in b.iter_mut() {
+            *x = sanitize(*x);
+            if *x < 0.0 {
+                negative += a * -*x;
+                neg = true;
+                if clamp_negative {
+                    *x = 0.0;
+                }
+            } else {
+                positive += a * *x;
+            }
+        }
+        negative_patches += neg as usize;
+    }
+    stats.negative_fraction = if positive > 0.0 {
+        negative / positive
+    } else {
+        0.0
+    };
+    stats.negative_patches = negative_patches;
+    let checked = bound > 0.0 && bound.is_finite();
+    let ratio = if checked { largest / bound } else { 0.0 };
+    stats.largest_b_over_bound = ratio;
+    stats.radiance_bound = if checked {
+        sanitize(bound * patches.emission_scale)
+    } else {
+        0.0
+    };
+    let new_failure = stats.failure.is_none();
+    if new_failure {
+        let kind = if !finite {
+            Some(FailureKind::NonFinite)
+        } else if ratio > 1.0 + health::BOUND_SLACK {
+            Some(FailureKind::OverBound)
+        } else if stats.negative_fraction > health::NEGATIVE_LIMIT {
+            Some(FailureKind::NegativeMass)
+        } else {
+            None
+        };
+        stats.failure = kind.map(|kind| SolveFailure {
+            kind,
+            sweep: stats.iterations,
+            in_result: true,
+            residual: stats.residual,
+            change_over_min: 0.0,
+            growing_sweeps: 0,
+            largest_b_over_bound: ratio,
+            bound: 0.0,
+            negative_fraction: 0.0,
+            max_row_sum: 0.0,
+        });
+    }
+    if let Some(f) = stats.failure.as_mut() {
+        // A failure found here is against this call's bound; one found before (during the
+        // sweeps, or by the inner solve of exact direct light) keeps the bound it was found with.
+        if new_failure {
+            f.bound = stats.radiance_bound;
+        }
+        f.max_row_sum = stats.max_row_sum;
+        f.negative_fraction = stats.negative_fraction;
+        stats.converged = false;
+    }
+    Solution::from_normalized(patches, &radiance, stats)
 }

@@ -1,5 +1,6 @@
 //! The warnings of a solve: what did not fail but is less accurate than asked.
 
+use crate::error::{Warning, WarningKind};
 use crate::memory::format_bytes;
 use crate::mesh::Patches;
 use crate::solve::solution::{self, SolveStats};
@@ -15,7 +16,7 @@ pub fn solve_warnings(
     stats: &SolveStats,
     options: &SolverOptions,
     patches: &Patches,
-) -> Vec<String> {
+) -> Vec<Warning> {
     memory_warning(stats.memory.as_ref())
         .into_iter()
         .chain(cap_warning(kind.name(), stats, options, patches))
@@ -29,27 +30,29 @@ pub fn solve_warnings(
 /// The warning for a solve whose largest B is above 1 + [`crate::solve::health::BOUND_WARNING`] times
 /// the bound `E_max / (1 - rho_max)` (but not above 1 + [`crate::solve::health::BOUND_SLACK`], which
 /// fails the solve); `None` otherwise.
-pub fn bound_warning(solver: &str, stats: &SolveStats) -> Option<String> {
+pub fn bound_warning(solver: &str, stats: &SolveStats) -> Option<Warning> {
+    let warn = |message: String| Warning::new(WarningKind::OverBound, message);
     let ratio = stats.largest_b_over_bound;
     (stats.failure.is_none() && ratio > 1.0 + crate::solve::health::BOUND_WARNING).then(|| {
-        format!(
-            "the {solver} solver's largest radiance is {ratio:.3} times the bound E_max/(1 - rho_max) = {:.6} the emission and albedos allow: some patches are brighter than the light can make them (cluster links or antiradiance bins too coarse; a smaller --epsilon or more --bins usually lowers it)",
+        warn(format!(
+            "the {solver} solver's largest radiance is {ratio:.3} times the bound E_max/(1 - rho_max) = {:.6} the emission and albedos allow: some patches are brighter than the light can make them (cluster links or antiradiance bins too coarse; a smaller SolverOptions::epsilon or more SolverOptions::bins usually lowers it)",
             stats.radiance_bound
         )
-    })
+    )})
 }
 
 /// The warning for a solve that scaled form-factor rows down to 1 (a convex enclosure whose
 /// rows summed above 1 + [`crate::solve::health::ROW_SUM_TOLERANCE`]; `None` when none was).
-pub fn capped_rows_warning(solver: &str, stats: &SolveStats) -> Option<String> {
+pub fn capped_rows_warning(solver: &str, stats: &SolveStats) -> Option<Warning> {
+    let warn = |message: String| Warning::new(WarningKind::CappedRows, message);
     (stats.capped_rows > 0).then(|| {
-        format!(
+        warn(format!(
             "the {solver} solver scaled {} down to 1: in this convex enclosure their form factors summed to up to {:.6} (more than 1 + {:.0e}, discretization error that 1/(1 - rho) would amplify)",
             plural(stats.capped_rows, "form-factor row", "form-factor rows"),
             stats.max_row_sum,
             crate::solve::health::ROW_SUM_TOLERANCE
         )
-    })
+    )})
 }
 
 /// The warning for a solve whose negative radiance mass is above
@@ -59,10 +62,11 @@ pub fn negative_warning(
     solver: &str,
     stats: &SolveStats,
     options: &SolverOptions,
-) -> Option<String> {
+) -> Option<Warning> {
+    let warn = |message: String| Warning::new(WarningKind::NegativeRadiance, message);
     (stats.failure.is_none() && stats.negative_fraction > crate::solve::health::NEGATIVE_WARNING).then(|| {
-        format!(
-            "the {solver} solver's negative radiance is {:.1}% of the positive mass (more than {:.0}%): antiradiance cancelled more light than it should{}; more --bins usually lowers it",
+        warn(format!(
+            "the {solver} solver's negative radiance is {:.1}% of the positive mass (more than {:.0}%): antiradiance cancelled more light than it should{}; more SolverOptions::bins usually lowers it",
             100.0 * stats.negative_fraction,
             100.0 * crate::solve::health::NEGATIVE_WARNING,
             if options.two_sided {
@@ -71,40 +75,42 @@ pub fn negative_warning(
                 ""
             }
         )
-    })
+    )})
 }
 
 /// The warning for a solve that was changed to fit its memory limit (`None` when nothing was):
 /// the limit, what was coarsened, and the estimate of the model solved.
-pub fn memory_warning(memory: Option<&budget::MemoryStats>) -> Option<String> {
+pub fn memory_warning(memory: Option<&budget::MemoryStats>) -> Option<Warning> {
+    let warn = |message: String| Warning::new(WarningKind::Memory, message);
     let m = memory?;
     if m.coarsened.is_empty() {
         return None;
     }
-    Some(format!(
-        "the model was coarsened to fit the memory limit of {} (--memory-limit): {}; its estimate is {} beside the {} in use before the solve; the result is less accurate than asked",
+    Some(warn(format!(
+        "the model was coarsened to fit the memory limit of {} (SolverOptions::memory_limit_bytes): {}; its estimate is {} beside the {} in use before the solve; the result is less accurate than asked",
         format_bytes(m.limit_bytes),
         m.coarsened.join(", "),
         format_bytes(m.estimate_bytes),
         format_bytes(m.base_bytes)
-    ))
+    )))
 }
 
 /// The warning for a solve that was asked for exact direct light but skipped it because the
 /// scene's emitters were over [`direct::DIRECT_LIGHT_BUDGET`] (`None` otherwise; a direct light
 /// skipped to fit the memory limit is in [`memory_warning`]).
-pub fn direct_light_warning(stats: &SolveStats, options: &SolverOptions) -> Option<String> {
+pub fn direct_light_warning(stats: &SolveStats, options: &SolverOptions) -> Option<Warning> {
+    let warn = |message: String| Warning::new(WarningKind::DirectLightSkipped, message);
     let for_memory = stats
         .memory
         .as_ref()
         .is_some_and(|m| m.coarsened.iter().any(|c| c == direct::DIRECT_LIGHT_OFF));
     (options.direct_light && stats.direct_light_skipped && !for_memory).then(|| {
-        format!(
-            "exact direct light skipped: receivers x emitter groups is over {:.0e} or the shadow rays over {:.0e}; antiradiance carried every bounce (--no-direct-light silences this)",
+        warn(format!(
+            "exact direct light skipped: receivers x emitter groups is over {:.0e} or the shadow rays over {:.0e}; antiradiance carried every bounce (SolverOptions::direct_light = false silences this)",
             direct::DIRECT_LIGHT_BUDGET as f64,
             direct::MAX_SHADOW_RAYS as f64
         )
-    })
+    )})
 }
 
 /// The warning for a solve that stopped at the iteration cap (`None` when it converged or
@@ -118,7 +124,8 @@ pub fn cap_warning(
     stats: &SolveStats,
     options: &SolverOptions,
     patches: &Patches,
-) -> Option<String> {
+) -> Option<Warning> {
+    let warn = |message: String| Warning::new(WarningKind::IterationCap, message);
     if stats.converged || stats.failure.is_some() {
         return None;
     }
@@ -141,16 +148,16 @@ pub fn cap_warning(
         );
         if more.is_finite() && more > 0.0 {
             text += &format!(
-                "; raise --max-iterations (to about {} at this rate)",
+                "; raise SolverOptions::max_iterations (to about {} at this rate)",
                 stats.iterations as f64 + more
             );
         } else {
-            text += "; raise --max-iterations or --tol";
+            text += "; raise SolverOptions::max_iterations or SolverOptions::tol";
         }
     } else {
-        text += "; raise --max-iterations or --tol";
+        text += "; raise SolverOptions::max_iterations or SolverOptions::tol";
     }
-    Some(text)
+    Some(warn(text))
 }
 
 /// `n` and the noun in singular or plural (`plural(2, "row", "rows")`).

@@ -37,6 +37,7 @@ use crate::solve::accelerate::Anderson;
 use crate::solve::budget::{
     self, Budget, HierarchicalCosts, LinkBudget, MemoryStats, ModelCounts, OverBudget,
 };
+use crate::solve::convergence::end_sweep;
 use crate::solve::health::{self, Guard};
 pub use crate::solve::solution::HierarchyTimings;
 use crate::solve::solution::{Solution, SolveStats};
@@ -183,7 +184,7 @@ impl Prepared {
             return Err(budget.does_not_fit(
                 &format!("the cluster tree of {} patches", patches.len()),
                 tree_bytes,
-                "raise --memory-limit",
+                "raise SolverOptions::memory_limit_bytes",
             ));
         }
         let channels = channels_needed(patches);
@@ -234,7 +235,7 @@ impl Prepared {
                             model.bins
                         ),
                         over.estimate,
-                        "raise --memory-limit",
+                        "raise SolverOptions::memory_limit_bytes",
                     ))
                 }
             }
@@ -734,18 +735,18 @@ impl Prepared {
             let change = change_ratio(sums.num, sums.den);
             std::mem::swap(&mut radiance, &mut next_radiance);
             std::mem::swap(&mut anti, &mut next_anti);
-            stats.iterations = iteration;
-            progress.inc(1);
-            progress.message(format!("residual {change:.2e}"));
-            if let Some(failure) =
-                guard.sweep(iteration, change, sums.num, sums.largest, sums.finite)
-            {
-                convergence.residual = change;
-                stats.failure = Some(failure);
-                break;
-            }
-            if convergence.sweep_done(iteration, change, options.tol) {
-                stats.converged = true;
+            if end_sweep(
+                iteration,
+                change,
+                sums.num,
+                sums.largest,
+                sums.finite,
+                options.tol,
+                &mut guard,
+                &mut convergence,
+                &mut stats,
+                progress,
+            ) {
                 break;
             }
             match anderson.as_mut() {

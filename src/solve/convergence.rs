@@ -1,0 +1,160 @@
+//! The iteration steps both solvers share: the change of a sweep, the convergence estimate, and
+//! what happens at the end of every sweep ([`end_sweep`]).
+
+use crate::mesh::Patches;
+use crate::progress::Progress;
+use crate::solve::health::Guard;
+use crate::solve::solution::SolveStats;
+
+/// Tracks residuals across iterations and decides convergence.
+///
+/// The residual r_k = |B_k - B_(k-1)| / |B_k| underestimates the remaining error when the
+/// iteration contracts slowly (albedo near 1): the remaining error is about r_k q / (1 - q) with
+/// q the contraction ratio r_k / r_(k-1). Convergence is declared on that estimate.
+#[derive(Clone, Debug, Default)]
+pub struct Convergence {
+    previous: Option<f64>,
+    /// Contraction ratios of the last sweeps, newest last.
+    ratios: Vec<f64>,
+    /// Sweeps since the last extrapolation.
+    since_extrapolation: usize,
+    /// The contraction ratio at the last extrapolation: the error estimate of the sweep right
+    /// after a jump uses it (that sweep's own ratio measures the jump, not the iteration).
+    q_at_jump: Option<f64>,
+    /// Last residual seen.
+    pub residual: f64,
+    /// Last estimate of the remaining relative error.
+    pub error_estimate: f64,
+    /// When set, the contraction ratio used for the error estimate is at least this (an
+    /// accelerated iteration's residual ratios understate the plain iteration's, which is what
+    /// turns a residual into an error: e = (I - T)^-1 f). The largest albedo bounds it.
+    pub contraction_bound: Option<f64>,
+}
+
+impl Convergence {
+    /// Records a residual; returns true when the estimated remaining error is under `tol`.
+    pub fn update(&mut self, residual: f64, tol: f64) -> bool {
+        self.residual = residual;
+        let q = match self.previous {
+            Some(p) if p > 0.0 => (residual / p).min(0.9999),
+            _ => self.q_at_jump.unwrap_or(0.9),
+        };
+        if self.previous.is_some() {
+            self.ratios.push(q);
+        }
+        self.since_extrapolation += 1;
+        self.previous = Some(residual);
+        let q = q.max(self.contraction_bound.unwrap_or(0.0)).min(0.9999);
+        self.error_estimate = if residual == 0.0 {
+            0.0
+        } else {
+            residual * q.max(0.0) / (1.0 - q.max(0.0)) + residual
+        };
+        self.error_estimate < tol
+    }
+
+    /// Records the residual of sweep `iteration` (1-based); true when the solve should stop:
+    /// the estimated remaining error is under `tol` and at least [`MIN_SWEEPS`] sweeps ran (the
+    /// first ones only propagate emission: light must bounce once and antiradiance must have had
+    /// a sweep to cancel it).
+    pub fn sweep_done(&mut self, iteration: usize, residual: f64, tol: f64) -> bool {
+        self.update(residual, tol) && iteration >= MIN_SWEEPS
+    }
+}
+
+impl Convergence {
+    /// The factor `q / (1 - q)` by which to extrapolate the last sweep's change (`x += k (x_k -
+    /// x_(k-1))`, the geometric tail of a linear iteration contracting by `q`), when the
+    /// contraction ratio has settled: the last three ratios agree within 2% and lie in (0.05,
+    /// 0.9999), and three sweeps have passed since the last extrapolation. `None` otherwise.
+    ///
+    /// The tail of a Jacobi iteration is dominated by one slowly decaying mode (for a closed
+    /// room, the overall light level), so one extrapolation removes most of what many sweeps
+    /// would: at albedo 0.75, about half the sweeps; near albedo 1, nearly all of them.
+    pub fn extrapolation_factor(&mut self) -> Option<f64> {
+        if self.since_extrapolation < 3 || self.ratios.len() < 3 {
+            return None;
+        }
+        let last = &self.ratios[self.ratios.len() - 3..];
+        let q = last[2];
+        let settled = last.iter().all(|r| (r - q).abs() <= 0.02 * q);
+        if !(settled && q > 0.05 && q < 0.9999) {
+            return None;
+        }
+        self.since_extrapolation = 0;
+        // The change right after a jump is not a contraction ratio of the plain iteration.
+        self.previous = None;
+        self.q_at_jump = Some(q);
+        self.ratios.clear();
+        Some(q / (1.0 - q))
+    }
+}
+
+/// Fewest sweeps before convergence may be declared.
+pub const MIN_SWEEPS: usize = 3;
+
+/// Area-weighted relative L1 change between two radiance vectors (NaN when the new vector is
+/// not finite, never 0 for a change that overflowed).
+pub fn relative_change(patches: &Patches, old: &[[f64; 3]], new: &[[f64; 3]]) -> f64 {
+    let (num, den) = change_sums(patches, old, new);
+    change_ratio(num, den)
+}
+
+/// The area-weighted L1 norms `(sum a |new - old|, sum a |new|)` over patches and RGB channels.
+pub fn change_sums(patches: &Patches, old: &[[f64; 3]], new: &[[f64; 3]]) -> (f64, f64) {
+    let mut num = 0.0;
+    let mut den = 0.0;
+    for p in 0..patches.len() {
+        let a = patches.area[p];
+        for c in 0..3 {
+            num += a * (new[p][c] - old[p][c]).abs();
+            den += a * new[p][c].abs();
+        }
+    }
+    (num, den)
+}
+
+/// The relative change `num / den`: 0 when nothing is lit (`den == 0`), NaN when either sum is
+/// not finite (an overflowed sweep must not read as "no change").
+pub fn change_ratio(num: f64, den: f64) -> f64 {
+    if !(num.is_finite() && den.is_finite()) {
+        f64::NAN
+    } else if den > 0.0 {
+        num / den
+    } else {
+        0.0
+    }
+}
+
+/// The end of sweep `iteration` (1-based), the same in both solvers: counts it, shows its
+/// `change` on the progress bar, asks the health `guard` (`num` the change's numerator,
+/// `largest` the largest |B|, `finite` whether every value is finite) and then `convergence`
+/// (against `tol`). True when the solve stops here: it failed (`stats.failure` is set) or
+/// converged (`stats.converged`).
+#[allow(clippy::too_many_arguments)]
+pub fn end_sweep(
+    iteration: usize,
+    change: f64,
+    num: f64,
+    largest: f64,
+    finite: bool,
+    tol: f64,
+    guard: &mut Guard,
+    convergence: &mut Convergence,
+    stats: &mut SolveStats,
+    progress: &Progress,
+) -> bool {
+    stats.iterations = iteration;
+    progress.inc(1);
+    progress.message(format!("residual {change:.2e}"));
+    if let Some(failure) = guard.sweep(iteration, change, num, largest, finite) {
+        convergence.residual = change;
+        stats.failure = Some(failure);
+        return true;
+    }
+    if convergence.sweep_done(iteration, change, tol) {
+        stats.converged = true;
+        return true;
+    }
+    false
+}
