@@ -202,6 +202,8 @@ pub use crate::cli::text::*;
 #[cfg(test)]
 mod tests {
     use super::*;
+    use antiradiance::solve::Preset;
+    use glam::DVec3;
 
     #[test]
     fn patch_count_matches_build_patches() {
