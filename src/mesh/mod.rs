@@ -136,6 +136,26 @@ impl Patches {
 
 pub use crate::scene::MAX_PATCHES;
 
+/// The area-weighted mean per patch of values given per element (a piece of a patch the
+/// solver works on: `(patch, area, value)`), summed in the order given; `None` for a patch
+/// without elements of positive total area. The one element-to-patch average of the solvers.
+pub fn patch_means(
+    patch_count: usize,
+    elements: impl IntoIterator<Item = (usize, f64, [f64; 3])>,
+) -> Vec<Option<[f64; 3]>> {
+    let mut sum = vec![[0.0f64; 3]; patch_count];
+    let mut area = vec![0.0f64; patch_count];
+    for (p, a, b) in elements {
+        area[p] += a;
+        for c in 0..3 {
+            sum[p][c] += a * b[c];
+        }
+    }
+    (0..patch_count)
+        .map(|p| (area[p] > 0.0).then(|| sum[p].map(|x| x / area[p])))
+        .collect()
+}
+
 /// The split of one input triangle (world corners): [`build_patches`] cuts it into k*k pieces,
 /// k = ceil(longest edge / max_edge) in 1..=1024; 1 for a degenerate triangle and for a
 /// `max_edge` that is `None`, not positive or not finite.

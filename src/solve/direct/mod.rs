@@ -712,23 +712,19 @@ impl<'a> DirectLight<'a> {
 /// When `receivers` and `reflected` differ in length or a receiver's patch is out of range.
 fn add_emission(patches: &Patches, receivers: &[Element], reflected: &[[f64; 3]]) -> Vec<[f64; 3]> {
     assert_eq!(receivers.len(), reflected.len());
-    let mut sum = vec![[0.0f64; 3]; patches.len()];
-    let mut area = vec![0.0f64; patches.len()];
-    for (r, b) in receivers.iter().zip(reflected) {
-        let p = r.patch as usize;
-        area[p] += r.area;
-        for c in 0..3 {
-            sum[p][c] += r.area * b[c];
-        }
-    }
-    (0..patches.len())
-        .map(|p| {
-            let e = patches.emission[p];
-            if area[p] > 0.0 {
-                [0, 1, 2].map(|c| e[c] + sum[p][c] / area[p])
-            } else {
-                e
-            }
+    let means = crate::mesh::patch_means(
+        patches.len(),
+        receivers
+            .iter()
+            .zip(reflected)
+            .map(|(r, b)| (r.patch as usize, r.area, *b)),
+    );
+    means
+        .iter()
+        .zip(&patches.emission)
+        .map(|(mean, e)| match mean {
+            Some(m) => [0, 1, 2].map(|c| e[c] + m[c]),
+            None => *e,
         })
         .collect()
 }

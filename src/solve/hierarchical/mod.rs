@@ -772,24 +772,13 @@ impl Prepared {
         // Elements -> patches (area-weighted mean, RGB); patches without elements (inactive) get
         // 0 here and their emission from `solve_with_emission`.
         let radiance_rgb: Vec<[f64; 3]> = radiance.iter().map(|&b| rgb_of(b)).collect();
-        let mut patch_sum = vec![[0.0f64; 3]; patches.len()];
-        let mut patch_area = vec![0.0f64; patches.len()];
-        for e in 0..n {
-            let p = self.elem_patch[e] as usize;
-            patch_area[p] += elem_area[e];
-            for c in 0..3 {
-                patch_sum[p][c] += elem_area[e] * radiance_rgb[e][c];
-            }
-        }
-        let patch_radiance: Vec<[f64; 3]> = (0..patches.len())
-            .map(|p| {
-                if patch_area[p] > 0.0 {
-                    patch_sum[p].map(|x| x / patch_area[p])
-                } else {
-                    [0.0; 3]
-                }
-            })
-            .collect();
+        let patch_radiance: Vec<[f64; 3]> = crate::mesh::patch_means(
+            patches.len(),
+            (0..n).map(|e| (self.elem_patch[e] as usize, elem_area[e], radiance_rgb[e])),
+        )
+        .into_iter()
+        .map(|m| m.unwrap_or([0.0; 3]))
+        .collect();
         self.timings.iterate = t0.elapsed().as_secs_f64();
         stats.stage_seconds = Some(self.timings.clone());
         stats.link_stats = Some(crate::solve::solution::LinkReport {
