@@ -1,0 +1,513 @@
+//! OBJ and MTL reading: a line-level scan of every file first (every error is
+//! `file:line: message`; tobj 4.0.5 panics on short colour lines, so it never sees one), then
+//! tobj for the faces and materials.
+
+use crate::error::{Error, Result, Warning, WarningKind};
+use crate::scene::*;
+use glam::DVec3;
+use std::path::Path;
+
+/// Reads an OBJ file (and the MTL files it names) into a [`Scene`].
+///
+/// Errors name the file and, where known, the line: missing or unreadable file, empty or binary
+/// file, malformed numbers, NaN or infinite coordinates, face index out of range, colour lines with
+/// fewer than three numbers, albedo outside [0, 1), negative emission, no non-degenerate triangle.
+/// A missing MTL file, a `usemtl` naming a material no MTL file defines, triangles that repeat
+/// an earlier one ([`Scene::duplicates`]) and a scene without emitters are warnings (in
+/// `Scene::warnings`).
+///
+/// Only what the model uses is read: vertex positions (`v x y z`, optionally `w`, vertex colours
+/// ignored), faces (position indices; texture and normal references are ignored), `mtllib`,
+/// `usemtl`, and the `newmtl`, `Kd` and `Ke` lines of material files. Comments may follow `#` on
+/// any line; words may be separated by spaces or tabs; lines may end in CRLF.
+pub fn load_obj(path: &Path, options: &SceneOptions) -> Result<Scene> {
+    options.validate()?;
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let text = as_text(path, &bytes)?;
+    let obj_scan = scan_obj(path, text)?;
+
+    // Materials: every MTL file is checked line by line first (tobj panics on short colour lines)
+    // and reduced to the lines we use (tobj drops a whole file over one line it cannot parse),
+    // then tobj resolves `usemtl` names against them.
+    let mut warnings = Vec::new();
+    let base_dir = path.parent().unwrap_or(Path::new("."));
+    let mut mtl_texts: Vec<String> = Vec::new();
+    let mut defined: std::collections::HashSet<String> = Default::default();
+    let mut mtl_missing = false;
+    for (line, name) in &obj_scan.mtllibs {
+        // `mtllib a.mtl b.mtl` names several files, unless a file of that whole name exists.
+        let whole = base_dir.join(name);
+        let names: Vec<&str> = if whole.is_file() || !name.contains(char::is_whitespace) {
+            vec![name.as_str()]
+        } else {
+            name.split_whitespace().collect()
+        };
+        for name in names {
+            let mtl_path = base_dir.join(name);
+            match std::fs::read(&mtl_path) {
+                Ok(mtl_bytes) => {
+                    let mtl_text = as_text(&mtl_path, &mtl_bytes)?;
+                    let mtl_scan = scan_mtl(&mtl_path, mtl_text)?;
+                    defined.extend(mtl_scan.names);
+                    mtl_texts.push(mtl_scan.clean);
+                }
+                Err(e) => {
+                    mtl_missing = true;
+                    warnings.push(Warning::in_file(
+                        WarningKind::Material,
+                        path,
+                        Some(*line),
+                        format!(
+                            "material file {} cannot be read ({e}); using SceneOptions::default_albedo for its materials",
+                            mtl_path.display()
+                        ),
+                    ))
+                }
+            }
+        }
+    }
+    if !mtl_missing {
+        let mut reported = std::collections::HashSet::new();
+        for (line, name) in &obj_scan.usemtls {
+            if !defined.contains(name) && reported.insert(name.as_str()) {
+                warnings.push(Warning::in_file(
+                    WarningKind::Material,
+                    path,
+                    Some(*line),
+                    format!(
+                        "material '{name}' is not defined in any material file; using SceneOptions::default_albedo"
+                    ),
+                ));
+            }
+        }
+    }
+
+    // Geometry through tobj: fan triangulation, models in file order. tobj reads the reduced text:
+    // every material file first (named by its index), all vertices, then faces and `usemtl`
+    // lines with absolute position indices only.
+    let mut clean = String::with_capacity(obj_scan.vertices.len() + obj_scan.body.len() + 64);
+    for i in 0..mtl_texts.len() {
+        clean.push_str(&format!("mtllib {i}\n"));
+    }
+    clean.push_str(&obj_scan.vertices);
+    clean.push_str(&obj_scan.body);
+    let load_options = tobj::LoadOptions {
+        triangulate: true,
+        single_index: false,
+        ignore_points: true,
+        ignore_lines: true,
+    };
+    let mtl_for = |p: &Path| -> tobj::MTLLoadResult {
+        let index = p.to_str().and_then(|k| k.trim().parse::<usize>().ok());
+        match index.and_then(|i| mtl_texts.get(i)) {
+            Some(mtl_text) => tobj::load_mtl_buf(&mut mtl_text.as_bytes()),
+            None => Err(tobj::LoadError::OpenFileFailed),
+        }
+    };
+    let (models, materials) = tobj::load_obj_buf(&mut clean.as_bytes(), &load_options, mtl_for)
+        .map_err(|e| Error::Scene {
+            path: path.to_path_buf(),
+            message: format!("cannot parse OBJ: {e}"),
+        })?;
+    let materials = materials.unwrap_or_default();
+
+    let mut scene = Scene {
+        path: path.to_path_buf(),
+        material_names: materials.iter().map(|m| m.name.clone()).collect(),
+        ..Scene::default()
+    };
+    for (i, raw) in text.lines().enumerate() {
+        match SceneCamera::parse(raw) {
+            Some(Ok(camera)) => scene.camera = Some(camera),
+            Some(Err(message)) => warnings.push(Warning::in_file(
+                WarningKind::Camera,
+                path,
+                Some(i + 1),
+                message,
+            )),
+            None => {}
+        }
+    }
+    let default_albedo = [options.default_albedo; 3];
+    for model in &models {
+        let mesh = &model.mesh;
+        let base = scene.positions.len() as u32;
+        for p in mesh.positions.chunks_exact(3) {
+            scene.positions.push(DVec3::new(p[0], p[1], p[2]));
+        }
+        let material_id = mesh
+            .material_id
+            .filter(|&i| i < materials.len())
+            .map(|i| i as u32);
+        let material = mesh.material_id.and_then(|i| materials.get(i));
+        let albedo = material
+            .and_then(|m| m.diffuse)
+            .map(|d| [d[0], d[1], d[2]])
+            .unwrap_or(default_albedo);
+        let emission = material
+            .and_then(|m| m.emissive)
+            .map(|e| [e[0], e[1], e[2]])
+            .unwrap_or([0.0; 3]);
+        for tri in mesh.indices.chunks_exact(3) {
+            scene
+                .triangles
+                .push([base + tri[0], base + tri[1], base + tri[2]]);
+            scene.albedo.push(albedo);
+            scene.emission.push(emission);
+            scene.material.push(material_id);
+        }
+    }
+    if scene.triangles.len() != obj_scan.triangle_count {
+        return Err(Error::Scene {
+            path: path.to_path_buf(),
+            message: format!(
+                "internal: read {} triangles but the file has {}",
+                scene.triangles.len(),
+                obj_scan.triangle_count
+            ),
+        });
+    }
+
+    if let Some(y) = options.emit_above {
+        for t in 0..scene.len() {
+            if scene.corners(t).iter().all(|p| p.y > y) {
+                scene.emission[t] = [options.emission; 3];
+            }
+        }
+    }
+
+    if scene.is_empty() {
+        return Err(Error::Scene {
+            path: path.to_path_buf(),
+            message: "no triangles (the file has no faces)".into(),
+        });
+    }
+    if scene.degenerate_count() == scene.len() {
+        return Err(Error::Scene {
+            path: path.to_path_buf(),
+            message: format!(
+                "no non-degenerate triangle among {} (all have zero area)",
+                scene.len()
+            ),
+        });
+    }
+    let duplicates = scene.duplicates();
+    if let Some(t) = duplicates.iter().position(Option::is_some) {
+        let count = duplicates.iter().filter(|d| d.is_some()).count();
+        let twin = duplicates[t].unwrap_or(0);
+        let differ = duplicates.iter().enumerate().any(|(t, d)| {
+            d.is_some_and(|u| {
+                scene.albedo[t] != scene.albedo[u as usize]
+                    || scene.emission[t] != scene.emission[u as usize]
+            })
+        });
+        warnings.push(Warning::in_file(WarningKind::Duplicate, path, None, format!(
+            "{} an earlier triangle (same corners, same orientation; first: triangle {t} repeats {twin}); each is solved once and reported with its first copy's radiance{}",
+            if count == 1 { "1 triangle repeats".to_string() } else { format!("{count} triangles repeat") },
+            if differ { " (some copies have other materials: the first copy's material is used)" } else { "" }
+        )));
+    }
+    if scene.emitter_count() == 0 {
+        warnings.push(Warning::in_file(
+            WarningKind::NoEmitter,
+            path,
+            None,
+            "no emitting triangle (no Ke in materials, no SceneOptions::emit_above match); the answer is all zero",
+        ));
+    }
+    scene.warnings = warnings;
+    Ok(scene)
+}
+
+/// Rejects binary and non-UTF-8 content with a one-line error.
+pub(crate) fn as_text<'a>(path: &Path, bytes: &'a [u8]) -> Result<&'a str> {
+    if bytes.contains(&0) {
+        return Err(Error::Scene {
+            path: path.to_path_buf(),
+            message: "binary file (contains NUL bytes), expected text".into(),
+        });
+    }
+    let text = std::str::from_utf8(bytes).map_err(|e| {
+        let line = bytes[..e.valid_up_to()]
+            .iter()
+            .filter(|&&b| b == b'\n')
+            .count()
+            + 1;
+        Error::Parse {
+            path: path.to_path_buf(),
+            line,
+            message: "not valid UTF-8 text (binary file?)".into(),
+        }
+    })?;
+    Ok(text.strip_prefix('\u{feff}').unwrap_or(text))
+}
+
+/// What the line-level scan of an OBJ file learned.
+pub(crate) struct ObjScan {
+    /// `mtllib` lines: (line number, the rest of the line).
+    mtllibs: Vec<(usize, String)>,
+    /// `usemtl` lines: (line number, material name).
+    usemtls: Vec<(usize, String)>,
+    /// Number of triangles after fan triangulation.
+    triangle_count: usize,
+    /// Every vertex as `v x y z` (w applied, colours dropped), one per line, in file order.
+    vertices: String,
+    /// Faces (absolute position indices only) and `usemtl` lines, in file order.
+    body: String,
+}
+
+pub(crate) fn parse_err(path: &Path, line: usize, message: impl Into<String>) -> Error {
+    Error::Parse {
+        path: path.to_path_buf(),
+        line,
+        message: message.into(),
+    }
+}
+
+/// A line without its comment, trimmed.
+pub(crate) fn content(raw: &str) -> &str {
+    raw.split('#').next().unwrap_or("").trim()
+}
+
+/// The rest of `line` after its first word, trimmed (names may contain spaces).
+pub(crate) fn rest_after_keyword(line: &str) -> &str {
+    line.split_once(char::is_whitespace)
+        .map(|(_, rest)| rest.trim())
+        .unwrap_or("")
+}
+
+/// Checks every `v` and `f` line of an OBJ file and reduces the file to what tobj needs, so tobj
+/// only ever sees well-formed input.
+pub(crate) fn scan_obj(path: &Path, text: &str) -> Result<ObjScan> {
+    let vertex_total = text
+        .lines()
+        .filter(|l| content(l).split_whitespace().next() == Some("v"))
+        .count();
+    let mut vertices_so_far = 0usize;
+    let mut scan = ObjScan {
+        mtllibs: Vec::new(),
+        usemtls: Vec::new(),
+        triangle_count: 0,
+        vertices: String::new(),
+        body: String::new(),
+    };
+    let number = |w: &str, line_no: usize, what: &str| -> Result<f64> {
+        let x: f64 = w
+            .parse()
+            .map_err(|_| parse_err(path, line_no, format!("malformed number '{w}' in {what}")))?;
+        if !x.is_finite() {
+            return Err(parse_err(
+                path,
+                line_no,
+                format!("{what} value '{w}' is not finite"),
+            ));
+        }
+        Ok(x)
+    };
+    for (i, raw) in text.lines().enumerate() {
+        let line_no = i + 1;
+        let line = content(raw);
+        let mut words = line.split_whitespace();
+        match words.next() {
+            Some("v") => {
+                let nums: Vec<&str> = words.collect();
+                if nums.len() < 3 {
+                    return Err(parse_err(path, line_no, "vertex needs three coordinates"));
+                }
+                if !matches!(nums.len(), 3 | 4 | 6) {
+                    return Err(parse_err(
+                        path,
+                        line_no,
+                        format!(
+                            "vertex has {} numbers; expected x y z, x y z w or x y z r g b",
+                            nums.len()
+                        ),
+                    ));
+                }
+                let mut xyz = [0.0; 3];
+                for (k, w) in nums[..3].iter().enumerate() {
+                    xyz[k] = number(w, line_no, "vertex coordinate")?;
+                }
+                for w in nums.iter().skip(4) {
+                    number(w, line_no, "vertex colour")?;
+                }
+                if nums.len() == 4 {
+                    let w = number(nums[3], line_no, "vertex weight")?;
+                    if w == 0.0 {
+                        return Err(parse_err(path, line_no, "vertex weight w is 0"));
+                    }
+                    let p = xyz.map(|x| x / w);
+                    if !p.iter().all(|x| x.is_finite()) {
+                        return Err(parse_err(
+                            path,
+                            line_no,
+                            "vertex coordinate is not finite after dividing by w",
+                        ));
+                    }
+                    scan.vertices
+                        .push_str(&format!("v {:e} {:e} {:e}\n", p[0], p[1], p[2]));
+                } else {
+                    scan.vertices
+                        .push_str(&format!("v {} {} {}\n", nums[0], nums[1], nums[2]));
+                }
+                vertices_so_far += 1;
+            }
+            Some("f") => {
+                let refs: Vec<&str> = words.collect();
+                if refs.len() < 3 {
+                    return Err(parse_err(
+                        path,
+                        line_no,
+                        "face needs at least three vertices",
+                    ));
+                }
+                scan.body.push('f');
+                for r in &refs {
+                    let first = r.split('/').next().unwrap_or("");
+                    let idx: i64 = first.parse().map_err(|_| {
+                        parse_err(path, line_no, format!("malformed face index '{r}'"))
+                    })?;
+                    let resolved = if idx > 0 {
+                        idx
+                    } else {
+                        vertices_so_far as i64 + idx + 1
+                    };
+                    if idx == 0 || resolved < 1 || resolved > vertex_total as i64 {
+                        return Err(parse_err(
+                            path,
+                            line_no,
+                            format!(
+                                "face index {idx} out of range (the file has {vertex_total} vertices)"
+                            ),
+                        ));
+                    }
+                    // Texture and normal references are not used: checked for syntax only.
+                    for part in r.split('/').skip(1) {
+                        if !part.is_empty() && part.parse::<i64>().is_err() {
+                            return Err(parse_err(
+                                path,
+                                line_no,
+                                format!("malformed face index '{r}'"),
+                            ));
+                        }
+                    }
+                    scan.body.push_str(&format!(" {resolved}"));
+                }
+                scan.body.push('\n');
+                scan.triangle_count += refs.len() - 2;
+            }
+            Some("mtllib") => {
+                let name = rest_after_keyword(line);
+                if !name.is_empty() {
+                    scan.mtllibs.push((line_no, name.to_string()));
+                }
+            }
+            Some("usemtl") => {
+                let name = rest_after_keyword(line);
+                if name.is_empty() {
+                    return Err(parse_err(path, line_no, "usemtl needs a material name"));
+                }
+                scan.body.push_str(&format!("usemtl {name}\n"));
+                scan.usemtls.push((line_no, name.to_string()));
+            }
+            _ => {}
+        }
+    }
+    if vertex_total == 0 || scan.triangle_count == 0 {
+        return Err(Error::Scene {
+            path: path.to_path_buf(),
+            message: "empty scene: no vertices or no faces".into(),
+        });
+    }
+    Ok(scan)
+}
+
+/// What the line-level scan of an MTL file learned.
+pub(crate) struct MtlScan {
+    /// Names of the materials the file defines.
+    names: Vec<String>,
+    /// The file reduced to `newmtl`, `Kd` and `Ke` lines.
+    clean: String,
+}
+
+/// Checks every colour line of an MTL file (tobj 4.0.5 panics on `Kd 0.5`) and the physical
+/// ranges, and reduces the file to the lines we use.
+pub(crate) fn scan_mtl(path: &Path, text: &str) -> Result<MtlScan> {
+    let mut scan = MtlScan {
+        names: Vec::new(),
+        clean: String::new(),
+    };
+    for (i, raw) in text.lines().enumerate() {
+        let line_no = i + 1;
+        let line = content(raw);
+        let mut words = line.split_whitespace();
+        let Some(key) = words.next() else { continue };
+        if key == "newmtl" {
+            let name = rest_after_keyword(line);
+            if name.is_empty() {
+                return Err(parse_err(path, line_no, "newmtl needs a material name"));
+            }
+            scan.clean.push_str(&format!("newmtl {name}\n"));
+            scan.names.push(name.to_string());
+            continue;
+        }
+        if !matches!(key, "Ka" | "Kd" | "Ks" | "Ke" | "Tf") {
+            continue;
+        }
+        let nums: Vec<&str> = words.collect();
+        if nums.first().is_some_and(|w| w.parse::<f64>().is_err()) {
+            // `Kd spectral file.rfl` / `Ka xyz ...`: a form we do not support.
+            return Err(parse_err(
+                path,
+                line_no,
+                format!("{key} must be three numbers (r g b)"),
+            ));
+        }
+        if nums.len() < 3 {
+            return Err(parse_err(
+                path,
+                line_no,
+                format!("{key} needs three numbers (r g b), found {}", nums.len()),
+            ));
+        }
+        let mut values = [0.0f64; 3];
+        for (k, w) in nums[..3].iter().enumerate() {
+            let x: f64 = w.parse().map_err(|_| {
+                parse_err(path, line_no, format!("malformed number '{w}' in {key}"))
+            })?;
+            if !x.is_finite() {
+                return Err(parse_err(
+                    path,
+                    line_no,
+                    format!("{key} value '{w}' is not finite"),
+                ));
+            }
+            values[k] = x;
+        }
+        if key == "Kd" && values.iter().any(|&x| !(0.0..1.0).contains(&x)) {
+            return Err(parse_err(
+                path,
+                line_no,
+                format!(
+                    "albedo Kd {} {} {} is outside [0, 1)",
+                    values[0], values[1], values[2]
+                ),
+            ));
+        }
+        if key == "Ke" && values.iter().any(|&x| x < 0.0) {
+            return Err(parse_err(
+                path,
+                line_no,
+                format!(
+                    "negative emission Ke {} {} {}",
+                    values[0], values[1], values[2]
+                ),
+            ));
+        }
+        if matches!(key, "Kd" | "Ke") {
+            scan.clean
+                .push_str(&format!("{key} {} {} {}\n", nums[0], nums[1], nums[2]));
+        }
+    }
+    Ok(scan)
+}
