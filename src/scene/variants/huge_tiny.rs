@@ -1,0 +1,456 @@
+//! The huge-tiny variant: a flat region re-triangulated from its outline (few huge triangles)
+//! beside an object split into many tiny ones, and the region-merging it needs.
+
+use super::*;
+use crate::error::{Error, Result};
+use crate::scene::Scene;
+use glam::{DVec2, DVec3};
+use std::collections::HashMap;
+
+/// Disjoint sets over `0..n`.
+pub(super) struct UnionFind(Vec<usize>);
+
+impl UnionFind {
+    pub(super) fn new(n: usize) -> UnionFind {
+        UnionFind((0..n).collect())
+    }
+    pub(super) fn find(&mut self, mut x: usize) -> usize {
+        while self.0[x] != x {
+            self.0[x] = self.0[self.0[x]];
+            x = self.0[x];
+        }
+        x
+    }
+    pub(super) fn union(&mut self, a: usize, b: usize) {
+        let (ra, rb) = (self.find(a), self.find(b));
+        if ra != rb {
+            self.0[ra.max(rb)] = ra.min(rb);
+        }
+    }
+    /// The sets, each sorted, in order of their smallest member.
+    pub(super) fn groups(&mut self, members: impl Iterator<Item = usize>) -> Vec<Vec<usize>> {
+        let mut index: HashMap<usize, usize> = HashMap::new();
+        let mut groups: Vec<Vec<usize>> = Vec::new();
+        for x in members {
+            let r = self.find(x);
+            let g = *index.entry(r).or_insert_with(|| {
+                groups.push(Vec::new());
+                groups.len() - 1
+            });
+            groups[g].push(x);
+        }
+        groups
+    }
+}
+
+/// The same material: index, albedo and emission bit for bit.
+pub(super) fn same_material(scene: &Scene, a: usize, b: usize) -> bool {
+    material_of(scene, a) == material_of(scene, b)
+        && scene.albedo[a].map(f64::to_bits) == scene.albedo[b].map(f64::to_bits)
+        && scene.emission[a].map(f64::to_bits) == scene.emission[b].map(f64::to_bits)
+}
+
+pub(super) fn unit_normal(c: &[DVec3; 3]) -> DVec3 {
+    (c[1] - c[0]).cross(c[2] - c[0]).normalize_or_zero()
+}
+
+/// A flat region re-triangulated from its outline: the new triangles (3D, counter-clockwise
+/// seen from the front) and, for each, the 2D coordinates of its corners in the region's plane.
+pub(super) struct Merged {
+    pub(super) tris: Vec<[DVec3; 3]>,
+    pub(super) flat: Vec<[DVec2; 3]>,
+}
+
+/// A frame of the plane through `origin` with unit normal `n`: 2D coordinates, counter-clockwise
+/// seen from the side `n` points to.
+pub(super) struct PlaneFrame {
+    pub(super) origin: DVec3,
+    pub(super) u: DVec3,
+    pub(super) v: DVec3,
+}
+
+impl PlaneFrame {
+    pub(super) fn new(origin: DVec3, n: DVec3) -> PlaneFrame {
+        let across = if n.x.abs() < 0.6 { DVec3::X } else { DVec3::Y };
+        let u = across.cross(n).normalize();
+        let v = n.cross(u);
+        PlaneFrame { origin, u, v }
+    }
+    pub(super) fn flat(&self, p: DVec3) -> DVec2 {
+        let d = p - self.origin;
+        DVec2::new(d.dot(self.u), d.dot(self.v))
+    }
+}
+
+pub(super) fn flat_area(t: &[DVec2; 3]) -> f64 {
+    0.5 * (t[1] - t[0]).perp_dot(t[2] - t[0])
+}
+
+/// Tries to re-triangulate `region` (triangles of one plane) from its outline: one boundary
+/// loop, exactly collinear outline vertices dropped, ear clipping. `None` when the region is
+/// not a simple polygon (holes, touching loops, inconsistent orientation) or the new
+/// triangles do not cover exactly its area.
+pub(super) fn merge_region(scene: &Scene, region: &[usize], frame: &PlaneFrame) -> Option<Merged> {
+    let mut directed: HashMap<EdgeKey, usize> = HashMap::new();
+    let mut position: HashMap<[u64; 3], DVec3> = HashMap::new();
+    for &t in region {
+        let c = scene.corners(t);
+        for e in 0..3 {
+            let (a, b) = (c[e], c[(e + 1) % 3]);
+            position.insert(key(a), a);
+            *directed.entry((key(a), key(b))).or_default() += 1;
+        }
+    }
+    if directed.values().any(|&n| n > 1) {
+        return None;
+    }
+    let mut next: HashMap<[u64; 3], [u64; 3]> = HashMap::new();
+    let mut start = None;
+    for &t in region {
+        let c = scene.corners(t);
+        for e in 0..3 {
+            let (a, b) = (key(c[e]), key(c[(e + 1) % 3]));
+            if !directed.contains_key(&(b, a)) {
+                if next.insert(a, b).is_some() {
+                    return None;
+                }
+                start.get_or_insert(a);
+            }
+        }
+    }
+    let start = start?;
+    let mut outline = vec![start];
+    let mut at = start;
+    loop {
+        at = *next.get(&at)?;
+        if at == start {
+            break;
+        }
+        outline.push(at);
+        if outline.len() > next.len() {
+            return None;
+        }
+    }
+    if outline.len() != next.len() || outline.len() > 4000 {
+        return None;
+    }
+    let mut points: Vec<DVec3> = outline.iter().map(|k| position[k]).collect();
+    // Drop outline vertices exactly on the line through their neighbours (to rounding).
+    let mut changed = true;
+    while changed && points.len() > 3 {
+        changed = false;
+        let m = points.len();
+        for i in 0..m {
+            let (a, b, c) = (points[(i + m - 1) % m], points[i], points[(i + 1) % m]);
+            let (d1, d2) = (b - a, c - b);
+            if d1.cross(d2).length() <= 1e-12 * d1.length() * d2.length() && d1.dot(d2) > 0.0 {
+                points.remove(i);
+                changed = true;
+                break;
+            }
+        }
+    }
+    let flat: Vec<DVec2> = points.iter().map(|&p| frame.flat(p)).collect();
+    let ears = ear_clip(&flat)?;
+    let merged = Merged {
+        tris: ears.iter().map(|e| e.map(|i| points[i])).collect(),
+        flat: ears.iter().map(|e| e.map(|i| flat[i])).collect(),
+    };
+    let region_area: f64 = region
+        .iter()
+        .map(|&t| flat_area(&scene.corners(t).map(|p| frame.flat(p))))
+        .sum();
+    let merged_area: f64 = merged.flat.iter().map(flat_area).sum();
+    let all_positive = merged.flat.iter().all(|t| flat_area(t) > 0.0);
+    (all_positive && (merged_area - region_area).abs() <= 1e-9 * region_area).then_some(merged)
+}
+
+/// Ear clipping of a simple polygon given counter-clockwise; triangles as index triples.
+pub(super) fn ear_clip(p: &[DVec2]) -> Option<Vec<[usize; 3]>> {
+    let area2: f64 = (0..p.len())
+        .map(|i| p[i].perp_dot(p[(i + 1) % p.len()]))
+        .sum();
+    if !(area2 > 0.0) {
+        return None;
+    }
+    let scale = p.iter().fold(0.0f64, |m, q| m.max(q.length()));
+    let eps = 1e-14 * scale * scale;
+    let cross = |a: DVec2, b: DVec2, c: DVec2| (b - a).perp_dot(c - a);
+    let mut idx: Vec<usize> = (0..p.len()).collect();
+    let mut out = Vec::with_capacity(p.len().saturating_sub(2));
+    let mut from = 0;
+    while idx.len() > 3 {
+        let m = idx.len();
+        let ear = (0..m).map(|step| (from + step) % m).find(|&j| {
+            let (a, b, c) = (idx[(j + m - 1) % m], idx[j], idx[(j + 1) % m]);
+            if cross(p[a], p[b], p[c]) <= eps {
+                return false;
+            }
+            idx.iter().all(|&q| {
+                q == a
+                    || q == b
+                    || q == c
+                    || p[q] == p[a]
+                    || p[q] == p[b]
+                    || p[q] == p[c]
+                    || cross(p[a], p[b], p[q]) < -eps
+                    || cross(p[b], p[c], p[q]) < -eps
+                    || cross(p[c], p[a], p[q]) < -eps
+            })
+        })?;
+        out.push([idx[(ear + m - 1) % m], idx[ear], idx[(ear + 1) % m]]);
+        idx.remove(ear);
+        from = ear % idx.len();
+    }
+    out.push([idx[0], idx[1], idx[2]]);
+    Some(out)
+}
+
+/// Area of the intersection of two counter-clockwise 2D triangles (Sutherland-Hodgman).
+pub(super) fn overlap_area(a: &[DVec2; 3], b: &[DVec2; 3]) -> f64 {
+    let mut poly: Vec<DVec2> = a.to_vec();
+    for e in 0..3 {
+        let (p, q) = (b[e], b[(e + 1) % 3]);
+        let side = |x: DVec2| (q - p).perp_dot(x - p);
+        let input = std::mem::take(&mut poly);
+        for i in 0..input.len() {
+            let (s, t) = (input[i], input[(i + 1) % input.len()]);
+            let (ds, dt) = (side(s), side(t));
+            if ds >= 0.0 {
+                poly.push(s);
+            }
+            if (ds >= 0.0) != (dt >= 0.0) {
+                poly.push(s + (t - s) * (ds / (ds - dt)));
+            }
+        }
+        if poly.len() < 3 {
+            return 0.0;
+        }
+    }
+    let area2: f64 = (0..poly.len())
+        .map(|i| poly[i].perp_dot(poly[(i + 1) % poly.len()]))
+        .sum();
+    (0.5 * area2).max(0.0)
+}
+
+/// `huge-tiny`: the largest flat region merged, the object nearest to it split into at least
+/// `tiny` triangles.
+pub(super) fn huge_tiny(scene: &Scene, tiny: usize) -> Result<(Out, String)> {
+    let n = scene.len();
+    let (lo, hi) = scene.bounds();
+    let diameter = (hi - lo).length();
+    let tol = 1e-6 * diameter;
+    let normals: Vec<DVec3> = (0..n).map(|t| unit_normal(&scene.corners(t))).collect();
+    let live: Vec<bool> = (0..n).map(|t| !scene.is_degenerate(t)).collect();
+
+    // Flat regions: edge neighbours in the same plane, same material, opposite edge directions.
+    let edges = Edges::of(scene, true);
+    let mut sets = UnionFind::new(n);
+    for k in &edges.order {
+        let sides = &edges.on[k];
+        if sides.len() != 2 {
+            continue;
+        }
+        let ((t1, e1), (t2, e2)) = (sides[0], sides[1]);
+        let (c1, c2) = (scene.corners(t1), scene.corners(t2));
+        let opposite = key(c1[e1]) == key(c2[(e2 + 1) % 3]);
+        let far = c2[(e2 + 2) % 3];
+        if opposite
+            && same_material(scene, t1, t2)
+            && normals[t1].dot(normals[t2]) >= 1.0 - 1e-8
+            && (far - c1[0]).dot(normals[t1]).abs() <= tol
+        {
+            sets.union(t1, t2);
+        }
+    }
+    let mut regions = sets.groups((0..n).filter(|&t| live[t]));
+    let region_area = |r: &Vec<usize>| r.iter().map(|&t| scene.area(t)).sum::<f64>();
+    // Reflecting regions first (the huge triangle should receive light), then by area.
+    let emits = |r: &Vec<usize>| scene.is_emitter(r[0]);
+    regions.sort_by(|a, b| {
+        emits(a)
+            .cmp(&emits(b))
+            .then(region_area(b).total_cmp(&region_area(a)))
+    });
+
+    let mut chosen = None;
+    for region in regions.iter().take(50) {
+        let area = region_area(region);
+        let normal = region
+            .iter()
+            .map(|&t| normals[t] * scene.area(t))
+            .sum::<DVec3>()
+            .normalize_or_zero();
+        let origin = scene.corners(region[0])[0];
+        let flat_enough = region.iter().all(|&t| {
+            scene
+                .corners(t)
+                .iter()
+                .all(|p| (*p - origin).dot(normal).abs() <= tol)
+        });
+        if normal == DVec3::ZERO || !flat_enough {
+            continue;
+        }
+        let frame = PlaneFrame::new(origin, normal);
+        if let Some(merged) = merge_region(scene, region, &frame) {
+            chosen = Some((region.clone(), frame, normal, merged, area));
+            break;
+        }
+    }
+    let (region, frame, normal, merged, area) = match chosen {
+        Some(c) => c,
+        None => {
+            // Every large region has holes: the largest triangle is the huge one.
+            let t = (0..n)
+                .filter(|&t| live[t])
+                .max_by(|&a, &b| scene.area(a).total_cmp(&scene.area(b)))
+                .ok_or_else(|| Error::Parameter("variant: every triangle is degenerate".into()))?;
+            let c = scene.corners(t);
+            let frame = PlaneFrame::new(c[0], normals[t]);
+            let merged = Merged {
+                tris: vec![c],
+                flat: vec![c.map(|p| frame.flat(p))],
+            };
+            (vec![t], frame, normals[t], merged, scene.area(t))
+        }
+    };
+    let in_region: Vec<bool> = {
+        let mut v = vec![false; n];
+        for &t in &region {
+            v[t] = true;
+        }
+        v
+    };
+
+    // Objects: the other triangles connected through shared vertices.
+    let mut by_vertex: HashMap<[u64; 3], usize> = HashMap::new();
+    let mut objects = UnionFind::new(n);
+    for t in (0..n).filter(|&t| live[t] && !in_region[t]) {
+        for p in scene.corners(t) {
+            let first = *by_vertex.entry(key(p)).or_insert(t);
+            objects.union(first, t);
+        }
+    }
+    let objects = objects.groups((0..n).filter(|&t| live[t] && !in_region[t]));
+    // Objects at most half the region's size, if there are any (else all): the nearest to the
+    // region's plane (touching counts as 0), then the smallest by area.
+    let extent = |tris: &[usize]| {
+        let mut lo = DVec3::splat(f64::INFINITY);
+        let mut hi = DVec3::splat(f64::NEG_INFINITY);
+        for p in tris.iter().flat_map(|&t| scene.corners(t)) {
+            lo = lo.min(p);
+            hi = hi.max(p);
+        }
+        (hi - lo).length()
+    };
+    let region_extent = extent(&region);
+    let small: Vec<&Vec<usize>> = objects
+        .iter()
+        .filter(|o| extent(o) <= 0.5 * region_extent)
+        .collect();
+    let candidates = if small.is_empty() {
+        objects.iter().collect()
+    } else {
+        small
+    };
+    let rank = |o: &Vec<usize>| {
+        let d = o
+            .iter()
+            .flat_map(|&t| scene.corners(t))
+            .map(|p| (p - frame.origin).dot(normal).abs())
+            .fold(f64::INFINITY, f64::min);
+        let d = if d <= tol { 0.0 } else { d };
+        (d, o.iter().map(|&t| scene.area(t)).sum::<f64>())
+    };
+    let nearest = candidates.into_iter().min_by(|a, b| {
+        let (ra, rb) = (rank(a), rank(b));
+        ra.0.total_cmp(&rb.0).then(ra.1.total_cmp(&rb.1))
+    });
+    let (object, k) = match nearest {
+        Some(o) => {
+            let k = ((tiny as f64 / o.len() as f64).sqrt().ceil() as usize).max(2);
+            (o.clone(), k)
+        }
+        None => (Vec::new(), 1),
+    };
+    let in_object: HashMap<usize, usize> =
+        object.iter().enumerate().map(|(i, &t)| (t, i)).collect();
+    let pieces = if object.is_empty() {
+        Scene::default()
+    } else {
+        let corners: Vec<[DVec3; 3]> = object.iter().map(|&t| scene.corners(t)).collect();
+        let zero = vec![[0.0; 3]; object.len()];
+        crate::scene::generated::subdivide(&Scene::from_triangles(&corners, &zero, &zero), k)
+    };
+
+    // Which original triangles each merged triangle covers (2D overlaps in the plane, scaled
+    // so that each original's rows sum to its own area).
+    let mut rows: Vec<Vec<(usize, f64)>> = vec![Vec::new(); merged.tris.len()];
+    for &t in &region {
+        let flat = scene.corners(t).map(|p| frame.flat(p));
+        let (fmin, fmax) = (
+            flat[0].min(flat[1]).min(flat[2]),
+            flat[0].max(flat[1]).max(flat[2]),
+        );
+        let mut overlaps: Vec<(usize, f64)> = Vec::new();
+        for (m, tri) in merged.flat.iter().enumerate() {
+            let (tmin, tmax) = (
+                tri[0].min(tri[1]).min(tri[2]),
+                tri[0].max(tri[1]).max(tri[2]),
+            );
+            if tmin.x > fmax.x || tmin.y > fmax.y || tmax.x < fmin.x || tmax.y < fmin.y {
+                continue;
+            }
+            let a = overlap_area(&flat, tri);
+            if a > 1e-12 * flat_area(&flat).abs() {
+                overlaps.push((m, a));
+            }
+        }
+        let total: f64 = overlaps.iter().map(|o| o.1).sum();
+        for (m, a) in overlaps {
+            rows[m].push((t, a * scene.area(t) / total));
+        }
+    }
+
+    let mut out = Out::default();
+    let mut region_done = false;
+    for (t, &in_region) in in_region.iter().enumerate() {
+        if in_region {
+            if !region_done {
+                region_done = true;
+                for (m, tri) in merged.tris.iter().enumerate() {
+                    let v = out.tris.len() as u32;
+                    let source = rows[m].first().map(|r| r.0).unwrap_or(t);
+                    out.tris.push(*tri);
+                    out.source.push(source as u32);
+                    for &(original, area) in &rows[m] {
+                        out.rows.push(MapRow {
+                            variant: v,
+                            original: original as u32,
+                            area,
+                            same_side: true,
+                        });
+                    }
+                }
+            }
+        } else if let Some(&i) = in_object.get(&t) {
+            for p in i * k * k..(i + 1) * k * k {
+                out.piece(pieces.corners(p), t);
+            }
+        } else {
+            out.push(scene.corners(t), t, scene.area(t), true);
+        }
+    }
+    let note = format!(
+        "huge-tiny: a flat region of {} triangles (area {}) as {} triangles, an object of {} triangles as {} (k = {k})",
+        region.len(),
+        area,
+        merged.tris.len(),
+        object.len(),
+        object.len() * k * k
+    );
+    Ok((out, note))
+}
+
+// ---------------------------------------------------------------------------------------------
+// Files
