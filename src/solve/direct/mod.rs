@@ -209,7 +209,7 @@ impl<'a> DirectLight<'a> {
     /// receiver (normalized units, RGB, never negative), in the order of `receivers`.
     ///
     /// Each receiver's `patch` must index `patches`; its corners, normal and area are in the unit
-    /// frame (as [`Prepared::elements`] gives them). Runs in parallel over receivers; sets the
+    /// frame (as [`crate::solve::hierarchical::Prepared::elements`] gives them). Runs in parallel over receivers; sets the
     /// progress message.
     pub fn reflected(&self, receivers: &[Element], progress: &Progress) -> Vec<[f64; 3]> {
         progress.message(format!(
