@@ -26,90 +26,9 @@ pub fn load_obj(path: &Path, options: &SceneOptions) -> Result<Scene> {
     let text = as_text(path, &bytes)?;
     let obj_scan = scan_obj(path, text)?;
 
-    // Materials: every MTL file is checked line by line first (tobj panics on short colour lines)
-    // and reduced to the lines we use (tobj drops a whole file over one line it cannot parse),
-    // then tobj resolves `usemtl` names against them.
     let mut warnings = Vec::new();
-    let base_dir = path.parent().unwrap_or(Path::new("."));
-    let mut mtl_texts: Vec<String> = Vec::new();
-    let mut defined: std::collections::HashSet<String> = Default::default();
-    let mut mtl_missing = false;
-    for (line, name) in &obj_scan.mtllibs {
-        // `mtllib a.mtl b.mtl` names several files, unless a file of that whole name exists.
-        let whole = base_dir.join(name);
-        let names: Vec<&str> = if whole.is_file() || !name.contains(char::is_whitespace) {
-            vec![name.as_str()]
-        } else {
-            name.split_whitespace().collect()
-        };
-        for name in names {
-            let mtl_path = base_dir.join(name);
-            match std::fs::read(&mtl_path) {
-                Ok(mtl_bytes) => {
-                    let mtl_text = as_text(&mtl_path, &mtl_bytes)?;
-                    let mtl_scan = scan_mtl(&mtl_path, mtl_text)?;
-                    defined.extend(mtl_scan.names);
-                    mtl_texts.push(mtl_scan.clean);
-                }
-                Err(e) => {
-                    mtl_missing = true;
-                    warnings.push(Warning::in_file(
-                        WarningKind::Material,
-                        path,
-                        Some(*line),
-                        format!(
-                            "material file {} cannot be read ({e}); using SceneOptions::default_albedo for its materials",
-                            mtl_path.display()
-                        ),
-                    ))
-                }
-            }
-        }
-    }
-    if !mtl_missing {
-        let mut reported = std::collections::HashSet::new();
-        for (line, name) in &obj_scan.usemtls {
-            if !defined.contains(name) && reported.insert(name.as_str()) {
-                warnings.push(Warning::in_file(
-                    WarningKind::Material,
-                    path,
-                    Some(*line),
-                    format!(
-                        "material '{name}' is not defined in any material file; using SceneOptions::default_albedo"
-                    ),
-                ));
-            }
-        }
-    }
-
-    // Geometry through tobj: fan triangulation, models in file order. tobj reads the reduced text:
-    // every material file first (named by its index), all vertices, then faces and `usemtl`
-    // lines with absolute position indices only.
-    let mut clean = String::with_capacity(obj_scan.vertices.len() + obj_scan.body.len() + 64);
-    for i in 0..mtl_texts.len() {
-        clean.push_str(&format!("mtllib {i}\n"));
-    }
-    clean.push_str(&obj_scan.vertices);
-    clean.push_str(&obj_scan.body);
-    let load_options = tobj::LoadOptions {
-        triangulate: true,
-        single_index: false,
-        ignore_points: true,
-        ignore_lines: true,
-    };
-    let mtl_for = |p: &Path| -> tobj::MTLLoadResult {
-        let index = p.to_str().and_then(|k| k.trim().parse::<usize>().ok());
-        match index.and_then(|i| mtl_texts.get(i)) {
-            Some(mtl_text) => tobj::load_mtl_buf(&mut mtl_text.as_bytes()),
-            None => Err(tobj::LoadError::OpenFileFailed),
-        }
-    };
-    let (models, materials) = tobj::load_obj_buf(&mut clean.as_bytes(), &load_options, mtl_for)
-        .map_err(|e| Error::Scene {
-            path: path.to_path_buf(),
-            message: format!("cannot parse OBJ: {e}"),
-        })?;
-    let materials = materials.unwrap_or_default();
+    let mtl_texts = read_materials(path, &obj_scan, &mut warnings)?;
+    let (models, materials) = parse_with_tobj(path, &obj_scan, &mtl_texts)?;
 
     let mut scene = Scene {
         path: path.to_path_buf(),
@@ -217,6 +136,106 @@ pub fn load_obj(path: &Path, options: &SceneOptions) -> Result<Scene> {
     }
     scene.warnings = warnings;
     Ok(scene)
+}
+
+/// The material step of [`load_obj`]: every MTL file the OBJ names, checked line by line
+/// first (tobj panics on short colour lines) and reduced to the lines we use (tobj drops a
+/// whole file over one line it cannot parse); missing files and undefined materials become
+/// warnings. Returns the reduced texts, in the order the files are named.
+fn read_materials(
+    path: &Path,
+    obj_scan: &ObjScan,
+    warnings: &mut Vec<Warning>,
+) -> Result<Vec<String>> {
+    let base_dir = path.parent().unwrap_or(Path::new("."));
+    let mut mtl_texts: Vec<String> = Vec::new();
+    let mut defined: std::collections::HashSet<String> = Default::default();
+    let mut mtl_missing = false;
+    for (line, name) in &obj_scan.mtllibs {
+        // `mtllib a.mtl b.mtl` names several files, unless a file of that whole name exists.
+        let whole = base_dir.join(name);
+        let names: Vec<&str> = if whole.is_file() || !name.contains(char::is_whitespace) {
+            vec![name.as_str()]
+        } else {
+            name.split_whitespace().collect()
+        };
+        for name in names {
+            let mtl_path = base_dir.join(name);
+            match std::fs::read(&mtl_path) {
+                Ok(mtl_bytes) => {
+                    let mtl_text = as_text(&mtl_path, &mtl_bytes)?;
+                    let mtl_scan = scan_mtl(&mtl_path, mtl_text)?;
+                    defined.extend(mtl_scan.names);
+                    mtl_texts.push(mtl_scan.clean);
+                }
+                Err(e) => {
+                    mtl_missing = true;
+                    warnings.push(Warning::in_file(
+                        WarningKind::Material,
+                        path,
+                        Some(*line),
+                        format!(
+                            "material file {} cannot be read ({e}); using SceneOptions::default_albedo for its materials",
+                            mtl_path.display()
+                        ),
+                    ))
+                }
+            }
+        }
+    }
+    if !mtl_missing {
+        let mut reported = std::collections::HashSet::new();
+        for (line, name) in &obj_scan.usemtls {
+            if !defined.contains(name) && reported.insert(name.as_str()) {
+                warnings.push(Warning::in_file(
+                    WarningKind::Material,
+                    path,
+                    Some(*line),
+                    format!(
+                        "material '{name}' is not defined in any material file; using SceneOptions::default_albedo"
+                    ),
+                ));
+            }
+        }
+    }
+
+    Ok(mtl_texts)
+}
+
+/// The geometry step of [`load_obj`]: tobj reads the reduced text (every material file first,
+/// named by its index, all vertices, then faces and `usemtl` lines with absolute position
+/// indices only) with fan triangulation, models in file order.
+fn parse_with_tobj(
+    path: &Path,
+    obj_scan: &ObjScan,
+    mtl_texts: &[String],
+) -> Result<(Vec<tobj::Model>, Vec<tobj::Material>)> {
+    let mut clean = String::with_capacity(obj_scan.vertices.len() + obj_scan.body.len() + 64);
+    for i in 0..mtl_texts.len() {
+        clean.push_str(&format!("mtllib {i}\n"));
+    }
+    clean.push_str(&obj_scan.vertices);
+    clean.push_str(&obj_scan.body);
+    let load_options = tobj::LoadOptions {
+        triangulate: true,
+        single_index: false,
+        ignore_points: true,
+        ignore_lines: true,
+    };
+    let mtl_for = |p: &Path| -> tobj::MTLLoadResult {
+        let index = p.to_str().and_then(|k| k.trim().parse::<usize>().ok());
+        match index.and_then(|i| mtl_texts.get(i)) {
+            Some(mtl_text) => tobj::load_mtl_buf(&mut mtl_text.as_bytes()),
+            None => Err(tobj::LoadError::OpenFileFailed),
+        }
+    };
+    let (models, materials) = tobj::load_obj_buf(&mut clean.as_bytes(), &load_options, mtl_for)
+        .map_err(|e| Error::Scene {
+            path: path.to_path_buf(),
+            message: format!("cannot parse OBJ: {e}"),
+        })?;
+    let materials = materials.unwrap_or_default();
+    Ok((models, materials))
 }
 
 /// Rejects binary and non-UTF-8 content with a one-line error.
