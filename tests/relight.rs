@@ -466,9 +466,10 @@ fn bad_emission_is_rejected_and_changes_nothing() {
         bins: 0,
         ..SolverOptions::default()
     };
+    // Library errors name the API value, not the command line's flag.
     assert_parameter_error(
         Relighter::new(&scene, None, &bad_options).map(|_| ()),
-        "--bins",
+        "SolverOptions::bins",
     );
     assert_parameter_error(
         Relighter::new(&scene, Some(0.0), &SolverOptions::fast()).map(|_| ()),
