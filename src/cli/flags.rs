@@ -8,6 +8,7 @@ const FLAGS: &[(&str, &str)] = &[
     ("SolverOptions::max_iterations", "--max-iterations"),
     ("SolverOptions::split_depth", "--split-depth"),
     ("SolverOptions::epsilon", "--epsilon"),
+    ("SolverOptions::flux_share", "--flux-share"),
     ("SolverOptions::bins", "--bins"),
     ("SolverOptions::tol", "--tol"),
     ("SolverKind::Hierarchical", "--solver hierarchical"),

@@ -32,6 +32,15 @@ pub struct Convergence {
 }
 
 impl Convergence {
+    /// Forgets the measured contraction ratios (the iteration changed: its sweeps are damped
+    /// from now on, see [`crate::solve::health::DAMPING`]).
+    pub fn restart(&mut self) {
+        self.previous = None;
+        self.ratios.clear();
+        self.since_extrapolation = 0;
+        self.q_at_jump = None;
+    }
+
     /// Records a residual; returns true when the estimated remaining error is under `tol`.
     pub fn update(&mut self, residual: f64, tol: f64) -> bool {
         self.residual = residual;
@@ -124,6 +133,24 @@ pub fn change_ratio(num: f64, den: f64) -> f64 {
     } else {
         0.0
     }
+}
+
+/// After a sweep that did not stop the solve, the same in both solvers: when the health `guard`
+/// asks for damping from now on (the sweeps' change kept growing or stalled), records
+/// `iteration` in `stats.damped_after`, restarts the `convergence` estimate (the iteration
+/// changed) and returns true, so the caller restarts whatever else measured the old iteration.
+pub fn start_damping(
+    iteration: usize,
+    guard: &mut Guard,
+    convergence: &mut Convergence,
+    stats: &mut SolveStats,
+) -> bool {
+    if !guard.wants_damping() {
+        return false;
+    }
+    stats.damped_after = Some(iteration);
+    convergence.restart();
+    true
 }
 
 /// The end of sweep `iteration` (1-based), the same in both solvers: counts it, shows its

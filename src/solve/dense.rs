@@ -15,7 +15,7 @@ use crate::geometry::bins::Bins;
 use crate::mesh::Patches;
 use crate::progress::Progress;
 use crate::solve::budget::{self, Budget, MemoryStats};
-use crate::solve::convergence::end_sweep;
+use crate::solve::convergence::{end_sweep, start_damping};
 use crate::solve::health::{self, Guard};
 use crate::solve::hierarchical::model;
 use crate::solve::solution::{Solution, SolveStats};
@@ -258,6 +258,11 @@ pub fn solve_dense(
             progress,
         ) {
             break;
+        }
+        start_damping(iteration, &mut guard, &mut convergence, &mut stats);
+        if guard.damped() {
+            crate::solve::health::damp(&mut radiance, &next_radiance);
+            crate::solve::health::damp(&mut anti, &next_anti);
         }
     }
     stats.residual = convergence.residual;

@@ -37,7 +37,7 @@ use crate::solve::accelerate::Anderson;
 use crate::solve::budget::{
     self, Budget, HierarchicalCosts, LinkBudget, MemoryStats, ModelCounts, OverBudget,
 };
-use crate::solve::convergence::end_sweep;
+use crate::solve::convergence::{end_sweep, start_damping};
 use crate::solve::health::{self, Guard};
 pub use crate::solve::solution::HierarchyTimings;
 use crate::solve::solution::{Solution, SolveStats};
@@ -148,6 +148,7 @@ pub fn link_params(options: &SolverOptions) -> LinkParams {
     LinkParams {
         epsilon: options.epsilon,
         max_split_depth: options.split_depth,
+        flux_share: options.flux_share,
         ..LinkParams::default()
     }
 }
@@ -748,6 +749,15 @@ impl Prepared {
                 progress,
             ) {
                 break;
+            }
+            if start_damping(iteration, &mut guard, &mut convergence, &mut stats) {
+                if let Some(acc) = anderson.as_mut() {
+                    acc.restart();
+                }
+            }
+            if guard.damped() {
+                health::damp(&mut radiance, &next_radiance);
+                health::damp(&mut anti, &next_anti);
             }
             match anderson.as_mut() {
                 // Anderson: the next state mixes the last sweeps' outputs.
