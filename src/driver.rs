@@ -560,7 +560,7 @@ pub struct Loaded {
 /// quiet), builds the patches. Precondition: `args.validate()` passed.
 pub fn load(args: &SceneArgs, timings: &mut Timings) -> Result<Loaded> {
     let scene = timed(&mut timings.load, || {
-        scene::load_obj(&args.scene, &args.options())
+        scene::load_scene(&args.scene, &args.options())
     })?;
     for w in &scene.warnings {
         eprintln!("warning: {}", one_line(w));

@@ -80,6 +80,9 @@ pub struct Scene {
     pub material_names: Vec<String>,
     /// Non-fatal findings (missing MTL, no emitter, ...), one line each.
     pub warnings: Vec<String>,
+    /// Analytic lights (point, spot, sun, sky) in the scene's frame, radiometric units
+    /// ([`crate::lights`]); from glTF's `KHR_lights_punctual` or the command line.
+    pub lights: Vec<crate::lights::Light>,
 }
 
 /// The shapes of a scene's non-degenerate triangles ([`Scene::shapes`]). The aspect ratio of a
@@ -277,6 +280,16 @@ impl Scene {
                 }
             })
             .collect()
+    }
+}
+
+/// Reads a scene file: glTF 2.0 (`.gltf`, `.glb`, see [`crate::gltf_in`]) by its extension,
+/// Wavefront OBJ ([`load_obj`]) otherwise.
+pub fn load_scene(path: &Path, options: &SceneOptions) -> Result<Scene> {
+    if crate::gltf_in::is_gltf(path) {
+        crate::gltf_in::load_gltf(path, options)
+    } else {
+        load_obj(path, options)
     }
 }
 

@@ -724,6 +724,7 @@ fn append(object: &Scene, extra: Builder) -> Scene {
         material,
         material_names: names,
         warnings: Vec::new(),
+        lights: object.lights.clone(),
     }
 }
 
