@@ -73,6 +73,14 @@ pub struct SceneArgs {
     /// solving; per-triangle results stay per input triangle (area-weighted mean of pieces).
     #[arg(long, value_name = "L", allow_negative_numbers = true)]
     pub max_edge: Option<f64>,
+    /// An analytic light (repeatable): point:X,Y,Z:R,G,B (W/sr),
+    /// spot:X,Y,Z:DX,DY,DZ:INNER,OUTER:R,G,B (W/sr on the axis, cone half-angles in degrees,
+    /// the direction it points) or sun:DX,DY,DZ:R,G,B (W/m^2, the direction light travels).
+    #[arg(long = "light", value_name = "LIGHT", value_parser = crate::lights::parse_light, allow_hyphen_values = true)]
+    pub lights: Vec<crate::lights::Light>,
+    /// A uniform sky of radiance R,G,B (W/(m^2 sr)) in every direction nothing blocks.
+    #[arg(long, value_name = "R,G,B", value_parser = crate::lights::parse_sky)]
+    pub sky: Option<crate::lights::Light>,
 }
 
 impl SceneArgs {
@@ -267,6 +275,10 @@ pub struct OutputArgs {
     /// The mesh (patches) with tone-mapped vertex colours and per-face float radiance.
     #[arg(long, value_name = "OUT.ply")]
     pub ply: Option<PathBuf>,
+    /// The mesh as binary glTF: linear per-vertex COLOR_0 (exposure-scaled), one primitive per
+    /// material, per-triangle radiance in an accessor named in each primitive's extras.
+    #[arg(long, value_name = "OUT.glb")]
+    pub gltf: Option<PathBuf>,
     /// A picture of the solution (auto-framed unless --eye / --target are given).
     #[arg(long, value_name = "OUT.png")]
     pub png: Option<PathBuf>,
@@ -321,6 +333,7 @@ impl OutputArgs {
         [
             ("--png", &self.png),
             ("--ply", &self.ply),
+            ("--gltf", &self.gltf),
             ("--triangles", &self.triangles),
             ("--report", &self.report),
         ]
@@ -562,6 +575,10 @@ pub fn load(args: &SceneArgs, timings: &mut Timings) -> Result<Loaded> {
     let scene = timed(&mut timings.load, || {
         scene::load_scene(&args.scene, &args.options())
     })?;
+    let mut scene = scene;
+    scene
+        .lights
+        .extend(args.lights.iter().chain(&args.sky).copied());
     for w in &scene.warnings {
         eprintln!("warning: {}", one_line(w));
     }
@@ -785,6 +802,12 @@ pub fn write_outputs(output: &OutputArgs, loaded: &Loaded, solution: &Solution) 
     }
     if let Some(path) = &output.triangles {
         output::write_triangles_csv(path, &loaded.scene, solution)?;
+    }
+    if let Some(path) = &output.gltf {
+        let exposure = output
+            .exposure
+            .unwrap_or_else(|| render::auto_exposure(&loaded.patches, solution));
+        crate::gltf_out::write_baked_glb(path, &loaded.scene, &loaded.patches, solution, exposure)?;
     }
     Ok(())
 }
