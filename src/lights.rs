@@ -398,8 +398,15 @@ fn irradiance(patches: &Patches, rays: &RayScene, p: usize, lights: &[Light]) ->
     total
 }
 
-/// Mean irradiance from one delta light over `count` stratified points of the triangle, and
-/// whether the points' visibilities differed (among points the light reaches).
+/// Mean irradiance from one delta light over the triangle, from `count` stratified points,
+/// and whether the points disagreed (some lit, some not, or a spot's falloff changing over the
+/// triangle), so that more points are worth it.
+///
+/// A point or spot light in front of the triangle's plane: the exact unoccluded mean
+/// `I * Omega / A` (the integral of `cos / r^2` over the triangle is the solid angle `Omega` it
+/// subtends at the light) times the ratio `sum f_i a_i V_i / sum f_i` over the points
+/// (`f = cos / r^2`, `a` the spot falloff, `V` the visibility), exact when nothing blocks a
+/// point light. A sun: `E cos` (constant over a flat triangle) times the visible fraction.
 fn delta_points(
     rays: &RayScene,
     tri: &crate::geometry::Tri,
@@ -409,32 +416,114 @@ fn delta_points(
     count: usize,
     rng: &mut Rng,
 ) -> ([f64; 3], bool) {
+    let area = crate::geometry::area(tri);
+    if !(area > 0.0) {
+        return ([0.0; 3], false);
+    }
+    // The exact unoccluded mean (per unit of the light's colour) and the colour.
+    let (unoccluded, colour) = match *light {
+        Light::Point {
+            position,
+            intensity,
+        }
+        | Light::Spot {
+            position,
+            intensity,
+            ..
+        } => {
+            if !(n.dot(position - tri[0]) > 0.0) {
+                return ([0.0; 3], false);
+            }
+            (crate::geometry::solid_angle(position, tri) / area, intensity)
+        }
+        Light::Sun {
+            direction,
+            irradiance,
+        } => {
+            let cos = -n.dot(direction.normalize());
+            if !(cos > 0.0) {
+                return ([0.0; 3], false);
+            }
+            (cos, irradiance)
+        }
+        Light::Sky { .. } => return ([0.0; 3], false),
+    };
     let k = count.isqrt().max(1);
-    let mut sum = [0.0f64; 3];
-    let (mut seen, mut hidden) = (false, false);
+    let (mut all, mut kept) = (0.0f64, 0.0f64);
+    let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
     for i in 0..k * k {
         let (a, b) = (
             ((i % k) as f64 + rng.next_f64()) / k as f64,
             ((i / k) as f64 + rng.next_f64()) / k as f64,
         );
         let x = point_on_triangle(tri, a.min(1.0), b.min(1.0));
-        let Some((w, dist, e)) = light.towards(x) else {
+        let Some((w, dist, _)) = light.towards(x) else {
             continue;
         };
         let cos = n.dot(w);
-        if !(cos > 0.0) || e.iter().all(|&v| v <= 0.0) {
+        if !(cos > 0.0) {
             continue;
         }
-        // The unit frame has diameter 1: a sun ray that got this far has left the scene.
-        let visible = rays.visible(x, w, dist.min(FAR), p, usize::MAX);
-        if visible {
-            seen = true;
-            for c in 0..3 {
-                sum[c] += e[c] * cos;
-            }
-        } else {
-            hidden = true;
+        let (f, falloff) = match *light {
+            Light::Spot {
+                direction,
+                inner,
+                outer,
+                ..
+            } => (
+                cos / (dist * dist),
+                spot_falloff(-w.dot(direction.normalize()), inner, outer),
+            ),
+            Light::Point { .. } => (cos / (dist * dist), 1.0),
+            _ => (1.0, 1.0),
+        };
+        if !f.is_finite() {
+            continue;
         }
+        all += f;
+        // The unit frame has diameter 1: a sun ray that got this far has left the scene.
+        let seen = falloff > 0.0 && rays.visible(x, w, dist.min(FAR), p, usize::MAX);
+        let g = if seen { falloff } else { 0.0 };
+        kept += f * g;
+        lo = lo.min(g);
+        hi = hi.max(g);
     }
-    (sum.map(|x| x / (k * k) as f64), seen && hidden)
+    if !(all > 0.0) {
+        return ([0.0; 3], false);
+    }
+    let ratio = kept / all;
+    (colour.map(|c| c * unoccluded * ratio), hi > lo)
+}
+
+/// Attaches `lights` (scene frame, radiometric) to freshly built `patches`: computes their
+/// reflected direct radiance ([`direct_source`]) into [`Patches::source`], stores the lights
+/// in the unit frame in [`Patches::lights`], and renormalizes so that the largest of the
+/// emission and the source is 1 (the emission scale then covers both).
+pub fn attach(patches: &mut Patches, lights: &[Light]) {
+    let old_scale = patches.emission_scale;
+    let emission_max = patches
+        .emission
+        .iter()
+        .flatten()
+        .fold(0.0f64, |m, &e| m.max(e))
+        * old_scale;
+    let unit: Vec<Light> = lights.iter().map(|l| l.to_unit(&patches.frame, 1.0)).collect();
+    let source = direct_source(patches, &unit);
+    let source_max = source.iter().flatten().fold(0.0f64, |m, &s| m.max(s));
+    let scale = emission_max.max(source_max);
+    let scale = if scale > 0.0 && scale.is_finite() {
+        scale
+    } else {
+        old_scale
+    };
+    let k = old_scale / scale;
+    for e in &mut patches.emission {
+        *e = e.map(|x| x * k);
+    }
+    patches.source = source.iter().map(|s| s.map(|x| x / scale)).collect();
+    patches.lights = lights
+        .iter()
+        .map(|l| l.to_unit(&patches.frame, scale))
+        .collect();
+    patches.emission_scale = scale;
 }
