@@ -434,7 +434,10 @@ fn delta_points(
             if !(n.dot(position - tri[0]) > 0.0) {
                 return ([0.0; 3], false);
             }
-            (crate::geometry::solid_angle(position, tri) / area, intensity)
+            (
+                crate::geometry::solid_angle(position, tri) / area,
+                intensity,
+            )
         }
         Light::Sun {
             direction,
@@ -507,7 +510,10 @@ pub fn attach(patches: &mut Patches, lights: &[Light]) {
         .flatten()
         .fold(0.0f64, |m, &e| m.max(e))
         * old_scale;
-    let unit: Vec<Light> = lights.iter().map(|l| l.to_unit(&patches.frame, 1.0)).collect();
+    let unit: Vec<Light> = lights
+        .iter()
+        .map(|l| l.to_unit(&patches.frame, 1.0))
+        .collect();
     let source = direct_source(patches, &unit);
     let source_max = source.iter().flatten().fold(0.0f64, |m, &s| m.max(s));
     let scale = emission_max.max(source_max);

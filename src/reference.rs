@@ -209,7 +209,13 @@ impl<'a> Tracer<'a> {
     }
 
     /// Next-event estimate from the emitting patches (see [`Self::direct`]).
-    fn emitter_light(&self, x: DVec3, n: DVec3, here: usize, (u, u1, u2): (f64, f64, f64)) -> [f64; 3] {
+    fn emitter_light(
+        &self,
+        x: DVec3,
+        n: DVec3,
+        here: usize,
+        (u, u1, u2): (f64, f64, f64),
+    ) -> [f64; 3] {
         if self.emitters.is_empty() {
             return [0.0; 3];
         }

@@ -559,6 +559,12 @@ fn check_scene(scene: &Scene) -> Result<()> {
     if scene.is_empty() {
         return Err(fail("no triangles".into()));
     }
+    if !scene.lights.is_empty() {
+        return Err(fail(format!(
+            "{} analytic lights (point, spot, sun, sky): the relighter animates emitting triangles only",
+            scene.lights.len()
+        )));
+    }
     if scene.albedo.len() != scene.len() || scene.emission.len() != scene.len() {
         return Err(fail(format!(
             "{} triangles but {} albedo and {} emission values",

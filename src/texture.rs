@@ -18,6 +18,7 @@
 //!   [`MAX_CELLS`] cells (UVs repeating a texture many times) over [`LARGE_SAMPLES`]
 //!   stratified samples.
 
+use std::collections::HashMap;
 use std::path::Path;
 
 /// Footprints (texel-space area) below this, with linear magnification, are averaged by
@@ -400,5 +401,309 @@ mod tests {
         // area in [1, 1.5] is 1/8, in [1.5, 2] is 3/8 of the half square -> 0.75 white.
         assert!((repeat[0] - 0.75).abs() < 1e-12, "{repeat:?}");
         assert!((clamp[0] - 1.0).abs() < 1e-12, "{clamp:?}");
+    }
+}
+
+/// A texture reference of an MTL file (`map_Kd` / `map_Ke`) with the options applied here.
+#[derive(Clone, Debug)]
+struct MapRef {
+    /// The image file, resolved against the MTL file's directory.
+    file: std::path::PathBuf,
+    /// `-s u v`: texture coordinate scale.
+    scale: [f64; 2],
+    /// `-o u v`: texture coordinate offset.
+    offset: [f64; 2],
+    /// `-clamp on`.
+    clamp: bool,
+}
+
+/// What the MTL files say about one material's textures.
+#[derive(Clone, Debug, Default)]
+struct MtlTextures {
+    kd: Option<[f64; 3]>,
+    ke: Option<[f64; 3]>,
+    map_kd: Option<MapRef>,
+    map_ke: Option<MapRef>,
+}
+
+/// Parses the arguments of a `map_*` line: options, then the file name (which may contain
+/// spaces).
+fn parse_map(dir: &Path, args: &[&str]) -> Option<MapRef> {
+    let mut r = MapRef {
+        file: std::path::PathBuf::new(),
+        scale: [1.0, 1.0],
+        offset: [0.0, 0.0],
+        clamp: false,
+    };
+    let mut i = 0;
+    let numbers = |i: &mut usize, max: usize| -> Vec<f64> {
+        let mut v = Vec::new();
+        while v.len() < max {
+            match args.get(*i).and_then(|w| w.parse::<f64>().ok()) {
+                Some(x) if x.is_finite() => {
+                    v.push(x);
+                    *i += 1;
+                }
+                _ => break,
+            }
+        }
+        v
+    };
+    while i < args.len() && args[i].starts_with('-') && args.len() - i > 1 {
+        let opt = args[i];
+        i += 1;
+        match opt {
+            "-s" => {
+                let v = numbers(&mut i, 3);
+                if v.len() >= 2 {
+                    r.scale = [v[0], v[1]];
+                } else if v.len() == 1 {
+                    r.scale = [v[0], v[0]];
+                }
+            }
+            "-o" => {
+                let v = numbers(&mut i, 3);
+                if v.len() >= 2 {
+                    r.offset = [v[0], v[1]];
+                } else if v.len() == 1 {
+                    r.offset = [v[0], 0.0];
+                }
+            }
+            "-t" => {
+                numbers(&mut i, 3);
+            }
+            "-mm" => {
+                numbers(&mut i, 2);
+            }
+            "-clamp" => {
+                r.clamp = args.get(i).is_some_and(|w| *w == "on");
+                i += 1;
+            }
+            _ => i += 1, // -blendu on, -bm 1, -texres n, -imfchan c, -type t, ...
+        }
+    }
+    let name = args[i.min(args.len())..].join(" ");
+    if name.is_empty() {
+        return None;
+    }
+    r.file = dir.join(name.replace('\\', "/"));
+    Some(r)
+}
+
+/// Reads the texture references of the MTL files an OBJ file names (`mtllib`), per material
+/// name (the first definition of a name wins, as for the colours).
+fn obj_material_textures(obj_path: &Path, obj_text: &str) -> HashMap<String, MtlTextures> {
+    let base = obj_path.parent().unwrap_or(Path::new("."));
+    let mut out: HashMap<String, MtlTextures> = HashMap::new();
+    for raw in obj_text.lines() {
+        let line = raw.split('#').next().unwrap_or("").trim();
+        let Some(name) = line.strip_prefix("mtllib") else {
+            continue;
+        };
+        if !name.starts_with(char::is_whitespace) {
+            continue;
+        }
+        let name = name.trim();
+        let whole = base.join(name);
+        let names: Vec<&str> = if whole.is_file() || !name.contains(char::is_whitespace) {
+            vec![name]
+        } else {
+            name.split_whitespace().collect()
+        };
+        for name in names {
+            let mtl_path = base.join(name);
+            let Ok(text) = std::fs::read_to_string(&mtl_path) else {
+                continue; // the scene loader already warned
+            };
+            let dir = mtl_path.parent().unwrap_or(Path::new(".")).to_path_buf();
+            let mut current: Option<String> = None;
+            for raw in text.lines() {
+                let line = raw.split('#').next().unwrap_or("").trim();
+                let words: Vec<&str> = line.split_whitespace().collect();
+                let Some(&key) = words.first() else { continue };
+                if key == "newmtl" {
+                    let n = line["newmtl".len()..].trim().to_string();
+                    // The first definition of a name wins.
+                    current = if out.contains_key(&n) {
+                        None
+                    } else {
+                        out.insert(n.clone(), MtlTextures::default());
+                        Some(n)
+                    };
+                    continue;
+                }
+                let Some(m) = current.as_ref().and_then(|n| out.get_mut(n)) else {
+                    continue;
+                };
+                let rgb = || -> Option<[f64; 3]> {
+                    let v: Vec<f64> = words[1..]
+                        .iter()
+                        .take(3)
+                        .filter_map(|w| w.parse().ok())
+                        .collect();
+                    (v.len() == 3).then(|| [v[0], v[1], v[2]])
+                };
+                match key {
+                    "Kd" => m.kd = rgb(),
+                    "Ke" => m.ke = rgb(),
+                    "map_Kd" => m.map_kd = parse_map(&dir, &words[1..]),
+                    "map_Ke" => m.map_ke = parse_map(&dir, &words[1..]),
+                    _ => {}
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The texture coordinates of every triangle of an OBJ file, in the loader's order (faces in
+/// file order, fan-triangulated as (0, i, i + 1)); `None` for a triangle whose corners do not
+/// all have a `vt` reference in range. `v` is flipped (OBJ's `v` runs up the image).
+fn obj_triangle_uvs(obj_text: &str) -> Vec<Option<[[f64; 2]; 3]>> {
+    let mut vts: Vec<[f64; 2]> = Vec::new();
+    let mut out = Vec::new();
+    for raw in obj_text.lines() {
+        let line = raw.split('#').next().unwrap_or("").trim();
+        let mut words = line.split_whitespace();
+        match words.next() {
+            Some("vt") => {
+                let v: Vec<f64> = words
+                    .take(2)
+                    .map(|w| w.parse().unwrap_or(f64::NAN))
+                    .collect();
+                let u = v.first().copied().unwrap_or(f64::NAN);
+                let w = v.get(1).copied().unwrap_or(0.0);
+                vts.push([u, 1.0 - w]);
+            }
+            Some("f") => {
+                let corners: Vec<Option<[f64; 2]>> = words
+                    .map(|r| {
+                        let t = r.split('/').nth(1)?;
+                        let i: i64 = t.parse().ok()?;
+                        let k = if i > 0 { i - 1 } else { vts.len() as i64 + i };
+                        (0..vts.len() as i64).contains(&k).then(|| vts[k as usize])
+                    })
+                    .collect();
+                for i in 1..corners.len().saturating_sub(1) {
+                    out.push(match (corners[0], corners[i], corners[i + 1]) {
+                        (Some(a), Some(b), Some(c)) => Some([a, b, c]),
+                        _ => None,
+                    });
+                }
+            }
+            _ => {}
+        }
+    }
+    out
+}
+
+/// Applies the `map_Kd` and `map_Ke` textures of an OBJ scene's materials to its triangles:
+/// albedo = `Kd` (1 when the material has none) x the texture's mean over the triangle's UV
+/// footprint, emission likewise with `Ke` and `map_Ke` (sRGB decoded, `-s`, `-o` and
+/// `-clamp` applied, repeat otherwise). A texture that cannot be read, or triangles without
+/// texture coordinates, keep the material's colour, with a warning naming the file and the
+/// material. Albedo at or above [`crate::gltf_in::ALBEDO_MAX`] is lowered to it, with a
+/// warning. Does nothing when no material has a texture.
+pub(crate) fn apply_obj_textures(
+    scene: &mut crate::scene::Scene,
+    obj_path: &Path,
+    obj_text: &str,
+    warnings: &mut Vec<String>,
+) {
+    let materials = obj_material_textures(obj_path, obj_text);
+    if !materials
+        .values()
+        .any(|m| m.map_kd.is_some() || m.map_ke.is_some())
+    {
+        return;
+    }
+    let uvs = obj_triangle_uvs(obj_text);
+    if uvs.len() != scene.len() {
+        warnings.push(format!(
+            "{}: textures not applied: {} textured faces counted, {} triangles loaded",
+            obj_path.display(),
+            uvs.len(),
+            scene.len()
+        ));
+        return;
+    }
+    let mut cache: HashMap<std::path::PathBuf, Option<Texture>> = HashMap::new();
+    let mut missing_uv: HashMap<String, usize> = HashMap::new();
+    let mut clamped: HashMap<String, usize> = HashMap::new();
+    let max = crate::gltf_in::ALBEDO_MAX;
+    for t in 0..scene.len() {
+        let Some(name) = scene.material_name(t).map(str::to_string) else {
+            continue;
+        };
+        let Some(m) = materials.get(&name) else {
+            continue;
+        };
+        for (map, emissive) in [(&m.map_kd, false), (&m.map_ke, true)] {
+            let Some(map) = map else { continue };
+            let texture = cache.entry(map.file.clone()).or_insert_with(|| {
+                match Texture::read(&map.file, true) {
+                    Ok(tex) => Some(tex),
+                    Err(e) => {
+                        warnings.push(format!(
+                            "{}: material '{name}': cannot read texture {}: {e}; {} used instead",
+                            obj_path.display(),
+                            map.file.display(),
+                            if emissive { "Ke" } else { "Kd" }
+                        ));
+                        None
+                    }
+                }
+            });
+            let Some(texture) = texture.as_ref() else {
+                continue;
+            };
+            let Some(uv) = uvs[t] else {
+                *missing_uv.entry(name.clone()).or_default() += 1;
+                continue;
+            };
+            let uv = uv.map(|[u, v]| {
+                // `v` was flipped: scale and offset apply to OBJ's own v.
+                let v_obj = 1.0 - v;
+                [
+                    u * map.scale[0] + map.offset[0],
+                    1.0 - (v_obj * map.scale[1] + map.offset[1]),
+                ]
+            });
+            let wrap = if map.clamp { Wrap::Clamp } else { Wrap::Repeat };
+            let sampling = Sampling {
+                wrap_u: wrap,
+                wrap_v: wrap,
+                nearest: false,
+            };
+            let mean = texture.mean_over(uv, &sampling);
+            if emissive {
+                let f = m.ke.unwrap_or([1.0; 3]);
+                scene.emission[t] = [0, 1, 2].map(|c| f[c] * mean[c]);
+            } else {
+                let f = m.kd.unwrap_or([1.0; 3]);
+                let mut a = [0, 1, 2].map(|c| f[c] * mean[c]);
+                if a.iter().any(|&x| x >= max) {
+                    *clamped.entry(name.clone()).or_default() += 1;
+                    a = a.map(|x| x.min(max));
+                }
+                scene.albedo[t] = a;
+            }
+        }
+    }
+    let mut missing: Vec<_> = missing_uv.into_iter().collect();
+    missing.sort();
+    for (name, n) in missing {
+        warnings.push(format!(
+            "{}: material '{name}': {n} textured triangles have no texture coordinates (vt); the material's colour is used for them",
+            obj_path.display()
+        ));
+    }
+    let mut clamped: Vec<_> = clamped.into_iter().collect();
+    clamped.sort();
+    for (name, n) in clamped {
+        warnings.push(format!(
+            "{}: material '{name}': textured albedo at or above {max} on {n} triangles lowered to {max} (the model needs albedo below 1)",
+            obj_path.display()
+        ));
     }
 }
