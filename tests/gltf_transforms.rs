@@ -205,3 +205,88 @@ fn punctual_lights_follow_their_nodes_in_radiometric_units() {
         other => panic!("{other:?}"),
     }
 }
+
+#[test]
+fn lights_written_to_gltf_read_back_the_same() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut scene = antiradiance::scenes::cornell_box();
+    scene.lights = vec![
+        Light::Point {
+            position: DVec3::new(278.0, 400.0, 279.0),
+            intensity: [3e4, 2e4, 1e4],
+        },
+        Light::Spot {
+            position: DVec3::new(100.0, 500.0, 100.0),
+            direction: DVec3::new(0.3, -1.0, 0.2).normalize(),
+            intensity: [5e4; 3],
+            inner: 0.3,
+            outer: 0.6,
+        },
+        Light::Sun {
+            direction: DVec3::new(-1.0, -2.0, -0.5).normalize(),
+            irradiance: [2.0, 2.0, 1.5],
+        },
+    ];
+    let path = dir.path().join("lit.glb");
+    antiradiance::gltf_out::write_scene_glb(&path, &scene).unwrap();
+    let back = load_scene(&path, &SceneOptions::default()).unwrap();
+    assert_eq!(back.lights.len(), 3);
+    let rgb_close =
+        |a: [f64; 3], b: [f64; 3]| (0..3).all(|c| (a[c] - b[c]).abs() <= 1e-5 * b[c].max(1.0));
+    for (a, b) in back.lights.iter().zip(&scene.lights) {
+        match (a, b) {
+            (
+                Light::Point {
+                    position: p,
+                    intensity: i,
+                },
+                Light::Point {
+                    position: q,
+                    intensity: j,
+                },
+            ) => {
+                assert!(
+                    (*p - *q).length() < 1e-3 && rgb_close(*i, *j),
+                    "{a:?} vs {b:?}"
+                );
+            }
+            (
+                Light::Spot {
+                    position: p,
+                    direction: d,
+                    intensity: i,
+                    inner,
+                    outer,
+                },
+                Light::Spot {
+                    position: q,
+                    direction: e,
+                    intensity: j,
+                    inner: i2,
+                    outer: o2,
+                },
+            ) => {
+                assert!(
+                    (*p - *q).length() < 1e-3 && (*d - *e).length() < 1e-5 && rgb_close(*i, *j)
+                );
+                assert!((inner - i2).abs() < 1e-6 && (outer - o2).abs() < 1e-6);
+            }
+            (
+                Light::Sun {
+                    direction: d,
+                    irradiance: i,
+                },
+                Light::Sun {
+                    direction: e,
+                    irradiance: j,
+                },
+            ) => {
+                assert!(
+                    (*d - *e).length() < 1e-5 && rgb_close(*i, *j),
+                    "{a:?} vs {b:?}"
+                );
+            }
+            _ => panic!("{a:?} vs {b:?}"),
+        }
+    }
+}
