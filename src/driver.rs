@@ -47,7 +47,8 @@ pub const MAX_PATCHES: u64 = 1 << 22;
 #[command(next_help_heading = "Scene options")]
 pub struct SceneArgs {
     /// Scene file: Wavefront OBJ; materials from the MTL files it names (Kd = albedo, Ke =
-    /// emitted radiance). Polygons are fan-triangulated in file order.
+    /// emitted radiance, map_Kd / map_Ke textures). Polygons are fan-triangulated in file order.
+    /// A name ending in .gltf or .glb is read as glTF 2.0.
     #[arg(value_name = "SCENE.obj", help_heading = "Arguments")]
     pub scene: PathBuf,
     /// Grey albedo in [0, 1) for triangles whose material has no Kd.
