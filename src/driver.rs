@@ -114,6 +114,8 @@ impl SceneArgs {
             "emit_above": self.emit_above,
             "emission": self.emission,
             "max_edge": self.max_edge,
+            "lights": self.lights.len(),
+            "sky": self.sky.is_some(),
         })
     }
 }

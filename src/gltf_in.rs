@@ -47,6 +47,9 @@ use crate::lights::{Light, LUMENS_PER_WATT};
 use crate::scene::{Scene, SceneOptions};
 use crate::texture::{Sampling, Texture, Wrap};
 
+/// Most elements of an accessor without a buffer view (zeros, optionally with sparse values).
+const MAX_VIEWLESS: usize = 1 << 26;
+
 /// Largest albedo the loader keeps (the model needs albedo below 1).
 pub const ALBEDO_MAX: f64 = 0.99;
 
@@ -296,10 +299,19 @@ fn read_accessor<const N: usize>(
             ))),
         }
     };
-    let mut rows = vec![[0.0f64; N]; count];
-    if let Some(view) = accessor.view() {
-        let (data, stride) = view_data(&view, elem)?;
+    let view = accessor.view();
+    if let Some(view) = &view {
+        let (data, stride) = view_data(view, elem)?;
         slice_rows(data, accessor.offset(), stride, count, elem, view.index())?;
+    } else if count > MAX_VIEWLESS {
+        // Elements without a buffer view are zeros (and sparse values): no buffer bounds them.
+        return Err(fail(format!(
+            "{count} elements without a buffer view (at most {MAX_VIEWLESS})"
+        )));
+    }
+    let mut rows = vec![[0.0f64; N]; count];
+    if let Some(view) = view {
+        let (data, stride) = view_data(&view, elem)?;
         for (i, row) in rows.iter_mut().enumerate() {
             let at = accessor.offset() + i * stride;
             for (k, x) in row.iter_mut().enumerate() {
@@ -432,7 +444,7 @@ pub fn load_gltf(path: &Path, options: &SceneOptions) -> Result<Scene> {
             "not glTF: neither the GLB magic 'glTF' at byte 0 nor a JSON object",
         ));
     }
-    let gltf = gltf::Gltf::from_slice(&bytes).map_err(|e| match e {
+    let gltf_error = |e: gltf::Error| match e {
         gltf::Error::Validation(list) => {
             let (p, err) = &list[0];
             let more = if list.len() > 1 {
@@ -457,9 +469,37 @@ pub fn load_gltf(path: &Path, options: &SceneOptions) -> Result<Scene> {
             ),
         ),
         other => scene_err(path, format!("invalid glTF: {other}")),
-    })?;
+    };
+    // Parsed first, validated after our own check of the POSITION references (gltf-json 1.4.1's
+    // validation indexes the accessors with them unchecked, and panics on a bad one).
+    let raw = gltf::Gltf::from_slice_without_validation(&bytes).map_err(gltf_error)?;
+    {
+        let root = raw.document.as_json();
+        for (m, mesh) in root.meshes.iter().enumerate() {
+            for (k, prim) in mesh.primitives.iter().enumerate() {
+                for (semantic, index) in &prim.attributes {
+                    if index.value() >= root.accessors.len() {
+                        let name = match semantic {
+                            gltf::json::validation::Checked::Valid(s) => s.to_string(),
+                            gltf::json::validation::Checked::Invalid => "?".to_string(),
+                        };
+                        return Err(scene_err(
+                            path,
+                            format!(
+                                "invalid glTF at meshes[{m}].primitives[{k}].attributes.{name}: accessor {} does not exist ({} accessors)",
+                                index.value(),
+                                root.accessors.len()
+                            ),
+                        ));
+                    }
+                }
+            }
+        }
+    }
+    let blob = raw.blob;
+    let document = gltf::Document::from_json(raw.document.into_json()).map_err(gltf_error)?;
     let base = path.parent().unwrap_or(Path::new(".")).to_path_buf();
-    let doc = &gltf.document;
+    let doc = &document;
     let mut warnings: Vec<String> = Vec::new();
     let warn = |w: &mut Vec<String>, m: String| w.push(format!("{}: {m}", path.display()));
 
@@ -468,7 +508,7 @@ pub fn load_gltf(path: &Path, options: &SceneOptions) -> Result<Scene> {
     for buffer in doc.buffers() {
         let what = format!("buffers[{}]", buffer.index());
         let data = match buffer.source() {
-            gltf::buffer::Source::Bin => gltf.blob.clone().ok_or_else(|| {
+            gltf::buffer::Source::Bin => blob.clone().ok_or_else(|| {
                 scene_err(
                     path,
                     format!("{what}: refers to the GLB binary chunk, which is missing"),
@@ -503,28 +543,37 @@ pub fn load_gltf(path: &Path, options: &SceneOptions) -> Result<Scene> {
             return Ok(index);
         }
         let what = format!("{what} (images[{index}])");
-        let (bytes, name) = match image.source() {
-            gltf::image::Source::View { view, .. } => {
-                let buffer = buffers
-                    .get(view.buffer().index())
-                    .ok_or_else(|| scene_err(path, format!("{what}: missing buffer")))?;
-                let end = view.offset().checked_add(view.length());
-                let data = end
-                    .and_then(|end| buffer.get(view.offset()..end))
-                    .ok_or_else(|| {
-                        scene_err(
-                            path,
-                            format!(
-                                "{what}: bufferViews[{}] lies outside its buffer",
-                                view.index()
-                            ),
-                        )
-                    })?;
-                (data.to_vec(), String::new())
-            }
-            gltf::image::Source::Uri { uri, .. } => {
-                (read_uri(path, &base, uri, &what)?, uri.to_string())
-            }
+        // Read from the JSON: gltf 1.4.1's `Image::source` panics on an image with a buffer
+        // view but no MIME type, or with neither a URI nor a buffer view.
+        let json = &doc.as_json().images[index];
+        let (bytes, name) = if let Some(v) = json.buffer_view {
+            let view = doc
+                .views()
+                .nth(v.value())
+                .ok_or_else(|| scene_err(path, format!("{what}: missing buffer view")))?;
+            let buffer = buffers
+                .get(view.buffer().index())
+                .ok_or_else(|| scene_err(path, format!("{what}: missing buffer")))?;
+            let end = view.offset().checked_add(view.length());
+            let data = end
+                .and_then(|end| buffer.get(view.offset()..end))
+                .ok_or_else(|| {
+                    scene_err(
+                        path,
+                        format!(
+                            "{what}: bufferViews[{}] lies outside its buffer",
+                            view.index()
+                        ),
+                    )
+                })?;
+            (data.to_vec(), String::new())
+        } else if let Some(uri) = &json.uri {
+            (read_uri(path, &base, uri, &what)?, uri.clone())
+        } else {
+            return Err(scene_err(
+                path,
+                format!("{what}: neither a uri nor a bufferView"),
+            ));
         };
         let texture = Texture::decode(&bytes, &name, true)
             .map_err(|e| scene_err(path, format!("{what}: {e}")))?;

@@ -527,7 +527,7 @@ fn delta_points(
                 outer,
             )
         });
-        edge = f.iter().any(|&x| x != f[0]) || f.iter().any(|&x| x != hi) || lo != hi;
+        edge = f.iter().any(|&x| x != f[0]);
     }
     if !(all > 0.0) {
         return ([0.0; 3], edge);
