@@ -256,6 +256,14 @@ pub fn solve_dense(
             stats.converged = true;
             break;
         }
+        if guard.wants_damping() {
+            stats.damped_after = Some(iteration);
+            convergence.restart();
+        }
+        if guard.damped() {
+            crate::health::damp(&mut radiance, &next_radiance);
+            crate::health::damp(&mut anti, &next_anti);
+        }
     }
     stats.residual = convergence.residual;
     stats.elements = active.len();

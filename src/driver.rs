@@ -175,6 +175,10 @@ pub struct SolverArgs {
     /// Link refinement threshold of the hierarchical solver (smaller is finer).
     #[arg(long, value_name = "E", allow_negative_numbers = true)]
     pub epsilon: Option<f64>,
+    /// Largest share of the scene's transport a geometrically coarse link may carry and still
+    /// be kept (0 refines by geometry alone); default 1e-5.
+    #[arg(long, value_name = "S", allow_negative_numbers = true)]
+    pub flux_share: Option<f64>,
     /// Stop when the estimated remaining relative error of B is under T.
     #[arg(long, value_name = "T", allow_negative_numbers = true)]
     pub tol: Option<f64>,
@@ -234,6 +238,9 @@ impl SolverArgs {
         }
         if let Some(epsilon) = self.epsilon {
             options.epsilon = epsilon;
+        }
+        if let Some(share) = self.flux_share {
+            options.flux_share = share;
         }
         if let Some(tol) = self.tol {
             options.tol = tol;

@@ -91,6 +91,25 @@ pub const GROWTH_SWEEPS: usize = 12;
 /// the blinds at 12 bins); diverging ones passed 10,000.
 pub const GROWTH_FACTOR: f64 = 1e4;
 
+/// Consecutive sweeps whose change grew after which a solver stops sweeping plainly and damps
+/// its sweeps by [`DAMPING`] (once per solve; see [`Guard::wants_damping`]). Below
+/// [`GROWTH_SWEEPS`], so that a recoverable solve is damped before it would be failed.
+pub const DAMP_AFTER_RISING: usize = 4;
+
+/// Sweeps without a new smallest change after which a solver damps its sweeps (see
+/// [`DAMP_AFTER_RISING`]).
+pub const DAMP_AFTER_STALLING: usize = 8;
+
+/// Weight of a damped sweep's output: the next state is `x + DAMPING * (G(x) - x)`.
+///
+/// The damped sweep has the same fixed point as the plain one (the same answer), and maps an
+/// eigenvalue `l` of the plain sweep to `1 - DAMPING * (1 - l)`. A plain sweep whose
+/// antiradiance makes an eigenvalue below -1 (an oscillation that grows every other sweep: a
+/// desk under a reversed top, near parallel slats blocking at both sides) diverges; damped by
+/// 0.5 it contracts for every eigenvalue in (-3, 1), at the cost of slower convergence of the
+/// slow positive modes (a closed room's light level), which Anderson mixing recovers.
+pub const DAMPING: f64 = 0.5;
+
 /// Changes below this fraction of the bound's mass are rounding noise (the antiradiance is f32,
 /// 6e-8 relative) and never count as growth: a solve asked for a tolerance near the rounding
 /// floor may see its change fluctuate there.
@@ -243,6 +262,10 @@ pub struct Guard {
     rising: usize,
     /// Largest |B| over the bound in the last sweep.
     pub largest_over_bound: f64,
+    /// The solver damps its sweeps ([`Guard::wants_damping`]).
+    damped: bool,
+    /// Sweeps since the change last reached a new minimum.
+    since_min: usize,
 }
 
 impl Guard {
@@ -261,6 +284,8 @@ impl Guard {
             previous_change: None,
             rising: 0,
             largest_over_bound: 0.0,
+            damped: false,
+            since_min: 0,
         }
     }
 
@@ -332,9 +357,68 @@ impl Guard {
             }
             if c < self.min_change {
                 self.min_change = c;
+                self.since_min = 0;
+            } else {
+                self.since_min += 1;
             }
         }
         None
+    }
+}
+
+impl Guard {
+    /// True once, when the change has grown [`DAMP_AFTER_RISING`] sweeps in a row, or has not
+    /// reached a new minimum for [`DAMP_AFTER_STALLING`] sweeps (an oscillation that neither
+    /// grows nor decays): the solver should damp its sweeps from now on ([`DAMPING`]). The
+    /// growth record starts again, so a damped solve that still grows fails
+    /// [`GROWTH_SWEEPS`] sweeps later.
+    pub fn wants_damping(&mut self) -> bool {
+        let stuck = self.rising >= DAMP_AFTER_RISING || self.since_min >= DAMP_AFTER_STALLING;
+        if self.damped || !stuck {
+            return false;
+        }
+        self.damped = true;
+        self.rising = 0;
+        self.since_min = 0;
+        self.min_change = f64::INFINITY;
+        self.previous_change = None;
+        true
+    }
+
+    /// True when the solve was damped ([`Self::wants_damping`] said so).
+    pub fn damped(&self) -> bool {
+        self.damped
+    }
+}
+
+/// Damps one sweep in place: `next = previous + DAMPING * (next - previous)`, per value.
+pub fn damp<const N: usize, T>(next: &mut [[T; N]], previous: &[[T; N]])
+where
+    T: Copy + Into<f64> + FromF64,
+{
+    for (x, p) in next.iter_mut().zip(previous) {
+        for c in 0..N {
+            let (xv, pv): (f64, f64) = (x[c].into(), p[c].into());
+            x[c] = T::from_f64(pv + DAMPING * (xv - pv));
+        }
+    }
+}
+
+/// Conversion back from f64 for [`damp`] (radiance is f64, antiradiance f32).
+pub trait FromF64 {
+    /// The value nearest `x`.
+    fn from_f64(x: f64) -> Self;
+}
+
+impl FromF64 for f64 {
+    fn from_f64(x: f64) -> f64 {
+        x
+    }
+}
+
+impl FromF64 for f32 {
+    fn from_f64(x: f64) -> f32 {
+        x as f32
     }
 }
 

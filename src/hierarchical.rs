@@ -149,6 +149,7 @@ pub fn link_params(options: &SolverOptions) -> LinkParams {
     LinkParams {
         epsilon: options.epsilon,
         max_split_depth: options.split_depth,
+        flux_share: options.flux_share,
         ..LinkParams::default()
     }
 }
@@ -750,6 +751,17 @@ impl Prepared {
             if convergence.sweep_done(iteration, change, options.tol) {
                 stats.converged = true;
                 break;
+            }
+            if guard.wants_damping() {
+                stats.damped_after = Some(iteration);
+                if let Some(acc) = anderson.as_mut() {
+                    acc.restart();
+                }
+                convergence.restart();
+            }
+            if guard.damped() {
+                health::damp(&mut radiance, &next_radiance);
+                health::damp(&mut anti, &next_anti);
             }
             match anderson.as_mut() {
                 // Anderson: the next state mixes the last sweeps' outputs.

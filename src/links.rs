@@ -33,6 +33,15 @@ pub struct LinkParams {
     /// bounding spheres': such pairs become cluster links (the receiver's single point
     /// integrates them well) instead of costly exact couplings. Default 1.
     pub leaf_gap: f64,
+    /// Largest share of the scene's transport a link may carry and still be accepted when it
+    /// is geometrically too coarse: `min(A_r * omega_s, A_s * omega_r) / (pi * A_scene)`, both
+    /// solid angles bounded from above, is the link's form-factor flux `A_r F_rs` (the light
+    /// it carries in a scene of uniform radiance) over the scene's area. Hierarchical
+    /// radiosity's BFA rule with uniform radiance: the error of a coarse link is at most the
+    /// light it carries, and small receivers (furniture, slivers, a fan of pieces) carry little.
+    /// It does not depend on the triangulation: splitting a triangle splits its links' shares.
+    /// 0 turns the rule off. 0..1e-4; [`FLUX_SHARE`] by default.
+    pub flux_share: f64,
 }
 
 impl Default for LinkParams {
@@ -43,9 +52,16 @@ impl Default for LinkParams {
             max_split_depth: 4,
             receiver_factor: 4.0,
             leaf_gap: 1.0,
+            flux_share: FLUX_SHARE,
         }
     }
 }
+
+/// The default [`LinkParams::flux_share`]. Seed room (default preset, against its 256-spp
+/// path-traced reference): 0 gives 0.73M links and 2.27% error; 1e-5 0.55M links, 2.27%;
+/// 3e-5 0.49M, 2.31%; 1e-4 0.29M, 2.63%. The Cornell box does not change. The generated
+/// classroom (fast preset): 44.5M links at 0, 27.6M at 1e-5.
+pub const FLUX_SHARE: f64 = 1e-5;
 
 /// A cluster link: sender node S sends to receiver node R as one exchange along `w`.
 #[derive(Clone, Copy, Debug)]
@@ -278,6 +294,8 @@ struct Traversal<'a> {
     record_culled: bool,
     /// Largest sender solid angle of a cluster link (steradians).
     limit: f64,
+    /// Largest `area * solid angle` of a link accepted by [`LinkParams::flux_share`].
+    flux_limit: f64,
     /// Counts what the round's tasks record against the memory budget.
     meter: &'a Meter<'a>,
 }
@@ -334,8 +352,10 @@ impl Traversal<'_> {
             let leaf_pair = sn.is_leaf()
                 && rn.is_leaf()
                 && gap * params.epsilon >= params.leaf_gap * 2.0 * rn.radius;
-            if small(solid_angle_bound(sn, rn, d), solid_angle_bound(rn, sn, d))
+            let (omega_s, omega_r) = (solid_angle_bound(sn, rn, d), solid_angle_bound(rn, sn, d));
+            if small(omega_s, omega_r)
                 || (leaf_pair && small(most_solid_angle(rn, sn), most_solid_angle(sn, rn)))
+                || (rn.area * omega_s).min(sn.area * omega_r) <= self.flux_limit
             {
                 // Receivers evaluate a cluster link at their elements' centroids with the
                 // direction from the sender's centroid, and (front-only) take nothing that
@@ -509,6 +529,7 @@ pub fn refine(
             coupling,
             record_culled,
             limit: params.epsilon * bins.mean_solid_angle(),
+            flux_limit: params.flux_share * std::f64::consts::PI * tree.nodes[0].area,
             meter: &meter,
         };
         // 1. Expand the top breadth first until there is work for every thread.

@@ -13,6 +13,10 @@ pub struct SolveStats {
     pub residual: f64,
     /// True when the residual went under the tolerance before the iteration cap.
     pub converged: bool,
+    /// The sweep after which the solver damped its sweeps because their change kept growing
+    /// ([`crate::health::DAMPING`]); `None` when every sweep was plain.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub damped_after: Option<usize>,
     /// Area-weighted mass of negative radiance before clamping, relative to the positive mass:
     /// sum a_p max(0, -B_p,c) / sum a_p max(0, B_p,c), both sums over patches p and RGB
     /// channels c (one ratio, not a mean of per-channel ratios).

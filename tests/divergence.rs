@@ -396,6 +396,46 @@ fn back_to_back_twins_of_venetian_blinds() {
     assert!(failed > 0, "the twin blinds diverge in some solver");
 }
 
+/// The one-sided blinds with the dense solver: its plain sweeps oscillate with a growing
+/// amplitude (an eigenvalue below -1, from slats that block light at both sides; they reached
+/// 34 times the bound and failed at sweep 17), and the solver recovers by damping its sweeps
+/// ([`health::DAMPING`]): the same fixed point, reached within the bound. Plain sweeps on the
+/// same scene would not converge: that is what the damping record shows.
+#[test]
+fn dense_blinds_recover_by_damping() {
+    let scene = blinds_room(30).scene();
+    let patches = build_patches(&scene, None);
+    let solution = solve_dense(&patches, &front_only(), &Progress::hidden()).expect("fits");
+    let st = &solution.stats;
+    assert!(st.failure.is_none(), "{:?}", st.failure);
+    assert!(
+        st.converged,
+        "{} sweeps, residual {}",
+        st.iterations, st.residual
+    );
+    let damped = st.damped_after.expect("the plain sweeps stop contracting");
+    assert!(
+        damped < st.iterations,
+        "damped after {damped} of {}",
+        st.iterations
+    );
+    let bound = bound_of(&scene);
+    let largest = solution
+        .triangle_radiance
+        .iter()
+        .flat_map(|b| b.iter().copied())
+        .fold(0.0f64, |m, x| m.max(x.abs()));
+    assert!(
+        largest <= bound * (1.0 + health::BOUND_SLACK),
+        "{largest} > {bound}"
+    );
+    assert!(
+        st.negative_fraction < health::NEGATIVE_WARNING,
+        "{}",
+        st.negative_fraction
+    );
+}
+
 /// Slivers touching a big polygon: a fan of 40 slivers (aspect ratios 190 and 19,000) standing
 /// on a floor made of two big triangles, one-sided and doubled back to back, front-only and
 /// two-sided antiradiance: within the bound or a reported failure.
