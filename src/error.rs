@@ -86,6 +86,15 @@ pub enum WarningKind {
     NegativeRadiance,
     /// Radiance above the bound the emission and albedos allow.
     OverBound,
+    /// A texture could not be read or applied (no texture coordinates): the material's colour
+    /// is used.
+    Texture,
+    /// Albedo at or above [`crate::scene::ALBEDO_MAX`] (a texture, a glTF factor) was lowered
+    /// to it.
+    Albedo,
+    /// Something the scene file asks for is not modelled and is ignored (a glTF extension,
+    /// a double-sided material, a light's range, primitives that are not triangles).
+    Unsupported,
 }
 
 /// A finding that does not stop the work (a missing material, a solve that hit its iteration

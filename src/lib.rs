@@ -4,14 +4,15 @@
 //!
 //! - [`geometry`]: exact kernels (solid angles, form factors, clipping), direction bins,
 //!   sampling, ray tracing over a BVH and every tolerance;
-//! - [`scene`]: what the user gives (OBJ+MTL loading, generated scenes, OBJ writing);
+//! - [`scene`]: what the user gives (OBJ+MTL and glTF loading, textures, analytic lights,
+//!   generated scenes, OBJ writing);
 //! - [`mesh`]: the solver's patches in a unit frame (splitting, twins);
 //! - [`hierarchy`]: the cluster tree and the links between its nodes;
 //! - [`transport`]: the couplings of one sender to one receiver, shared by every solver;
 //! - [`mod@solve`]: options and presets, the dense oracle, the hierarchical solver, exact direct
 //!   light, relighting, and the [`solve::solution::Solution`] every solver returns;
 //! - [`mod@reference`]: the path tracer used as ground truth;
-//! - [`output`]: CSV, PLY, PNG pictures, atomic writes.
+//! - [`output`]: CSV, PLY, binary glTF, PNG pictures, atomic writes.
 //!
 //! The command line (`src/cli/`, the `cli` feature) is a client of this library like any other.
 //!
@@ -76,9 +77,10 @@ use solve::relight::Relighter;
 use solve::solution::Solution;
 use solve::{SolverKind, SolverOptions};
 
-/// Reads an OBJ file and the MTL files it names ([`scene::load_obj`]).
+/// Reads a scene file ([`scene::load_scene`]): glTF 2.0 when the name ends in `.gltf` or
+/// `.glb`, otherwise an OBJ file and the MTL files it names.
 pub fn load(path: &Path, options: &SceneOptions) -> Result<Scene> {
-    scene::load_obj(path, options)
+    scene::load_scene(path, options)
 }
 
 /// A solved scene: the patches it was solved on, the solution, and what to warn about.
@@ -119,7 +121,8 @@ pub fn relight(scene: &Scene, max_edge: Option<f64>, options: &SolverOptions) ->
 
 /// Writes a result, chosen by the file's extension: `.csv` the per-triangle CSV
 /// ([`output::write_triangles_csv`]), `.ply` the coloured mesh at auto exposure
-/// ([`output::write_ply`]), `.png` a smoothly shaded picture from the scene's camera or
+/// ([`output::write_ply`]), `.glb` binary glTF with the baked radiance at auto exposure
+/// ([`output::write_baked_glb`]), `.png` a smoothly shaded picture from the scene's camera or
 /// auto-framed ([`output::render::render_png_shaded`]). Atomic: a failure leaves no file.
 pub fn write(path: &Path, scene: &Scene, solved: &Solved) -> Result<()> {
     let extension = path
@@ -147,8 +150,12 @@ pub fn write(path: &Path, scene: &Scene, solved: &Solved) -> Result<()> {
                 output::render::Shading::Smooth,
             )
         }
+        Some("glb") => {
+            let exposure = output::render::auto_exposure(&solved.patches, &solved.solution);
+            output::write_baked_glb(path, scene, &solved.patches, &solved.solution, exposure)
+        }
         _ => Err(Error::Parameter(format!(
-            "{}: write needs a .csv, .ply or .png file name",
+            "{}: write needs a .csv, .ply, .glb or .png file name",
             path.display()
         ))),
     }

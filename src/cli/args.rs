@@ -3,6 +3,7 @@
 
 use antiradiance::error::{Error, Result};
 use antiradiance::output::render::CameraOptions;
+use antiradiance::scene::lights::{self, Light};
 use antiradiance::scene::{Scene, SceneOptions};
 use antiradiance::solve::budget;
 use antiradiance::solve::{Preset, SolverKind, SolverOptions};
@@ -18,7 +19,8 @@ use crate::cli::driver::*;
 #[command(next_help_heading = "Scene options")]
 pub struct SceneArgs {
     /// Scene file: Wavefront OBJ; materials from the MTL files it names (Kd = albedo, Ke =
-    /// emitted radiance). Polygons are fan-triangulated in file order.
+    /// emitted radiance, map_Kd / map_Ke textures). Polygons are fan-triangulated in file order.
+    /// A name ending in .gltf or .glb is read as glTF 2.0.
     #[arg(value_name = "SCENE.obj", help_heading = "Arguments")]
     pub scene: PathBuf,
     /// Grey albedo in [0, 1) for triangles whose material has no Kd.
@@ -44,6 +46,14 @@ pub struct SceneArgs {
     /// solving; per-triangle results stay per input triangle (area-weighted mean of pieces).
     #[arg(long, value_name = "L", allow_negative_numbers = true)]
     pub max_edge: Option<f64>,
+    /// An analytic light (repeatable): point:X,Y,Z:R,G,B (W/sr),
+    /// spot:X,Y,Z:DX,DY,DZ:INNER,OUTER:R,G,B (W/sr on the axis, cone half-angles in degrees,
+    /// the direction it points) or sun:DX,DY,DZ:R,G,B (W/m^2, the direction light travels).
+    #[arg(long = "light", value_name = "LIGHT", value_parser = lights::parse_light, allow_hyphen_values = true)]
+    pub lights: Vec<Light>,
+    /// A uniform sky of radiance R,G,B (W/(m^2 sr)) in every direction nothing blocks.
+    #[arg(long, value_name = "R,G,B", value_parser = lights::parse_sky)]
+    pub sky: Option<Light>,
 }
 
 impl SceneArgs {
@@ -76,6 +86,8 @@ impl SceneArgs {
             "emit_above": self.emit_above,
             "emission": self.emission,
             "max_edge": self.max_edge,
+            "lights": self.lights.len(),
+            "sky": self.sky.is_some(),
         })
     }
 }
@@ -203,6 +215,10 @@ pub struct OutputArgs {
     /// The mesh (patches) with tone-mapped vertex colours and per-face float radiance.
     #[arg(long, value_name = "OUT.ply")]
     pub ply: Option<PathBuf>,
+    /// The mesh as binary glTF: linear per-vertex COLOR_0 (exposure-scaled), one primitive per
+    /// material, per-triangle radiance in an accessor named in each primitive's extras.
+    #[arg(long, value_name = "OUT.glb")]
+    pub gltf: Option<PathBuf>,
     /// A picture of the solution (auto-framed unless --eye / --target are given).
     #[arg(long, value_name = "OUT.png")]
     pub png: Option<PathBuf>,
@@ -265,6 +281,7 @@ impl OutputArgs {
         [
             ("--png", &self.png),
             ("--ply", &self.ply),
+            ("--gltf", &self.gltf),
             ("--triangles", &self.triangles),
             ("--report", &self.report),
         ]

@@ -3,7 +3,7 @@
 //! Every command reads top-down in the same order:
 //!
 //! 1. **check** every parameter and output path (nothing is loaded or solved with a bad one);
-//! 2. **load** the scene ([`scene::load_obj`]) and print its warnings;
+//! 2. **load** the scene ([`scene::load_scene`]: OBJ or glTF) and print its warnings;
 //! 3. **build** the patches ([`mesh::build_patches`], `--max-edge` splits triangles);
 //! 4. **solve** ([`dense::solve_dense`], [`hierarchical::solve_hierarchical`] or
 //!    [`reference::solve_reference`]);
@@ -128,9 +128,12 @@ pub struct Loaded {
 /// Stages 2 and 3: loads the scene, prints its warnings (`warning: ...` on stderr, even when
 /// quiet), builds the patches. Precondition: `args.validate()` passed.
 pub fn load(args: &SceneArgs, timings: &mut Timings) -> Result<Loaded> {
-    let scene = timed(&mut timings.load, || {
-        scene::load_obj(&args.scene, &args.options())
+    let mut scene = timed(&mut timings.load, || {
+        scene::load_scene(&args.scene, &args.options())
     })?;
+    scene
+        .lights
+        .extend(args.lights.iter().chain(&args.sky).copied());
     for w in &scene.warnings {
         print_warning(w);
     }
@@ -170,7 +173,7 @@ pub fn run_reference(patches: &Patches, options: &ReferenceOptions, quiet: bool)
     solution
 }
 
-/// Stage 5 without the report: picture, PLY, CSV (each atomic). Preconditions:
+/// Stage 5 without the report: picture, PLY, CSV, binary glTF (each atomic). Preconditions:
 /// `output.validate()` passed and `solution` belongs to `loaded`.
 pub fn write_outputs(output: &OutputArgs, loaded: &Loaded, solution: &Solution) -> Result<()> {
     let camera = output.camera_for(&loaded.scene);
@@ -190,6 +193,12 @@ pub fn write_outputs(output: &OutputArgs, loaded: &Loaded, solution: &Solution) 
     }
     if let Some(path) = &output.triangles {
         output::write_triangles_csv(path, &loaded.scene, solution)?;
+    }
+    if let Some(path) = &output.gltf {
+        let exposure = output
+            .exposure
+            .unwrap_or_else(|| render::auto_exposure(&loaded.patches, solution));
+        output::write_baked_glb(path, &loaded.scene, &loaded.patches, solution, exposure)?;
     }
     Ok(())
 }

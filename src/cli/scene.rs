@@ -63,7 +63,7 @@ pub enum StageKind {
 #[derive(Args, Clone, Debug)]
 pub struct OutArgs {
     /// Scene file to write; the MTL file goes next to it (same name, extension .mtl). Both are
-    /// written atomically.
+    /// written atomically. A name ending in .glb writes binary glTF instead.
     #[arg(long, value_name = "OUT.obj")]
     pub out: PathBuf,
     /// Print nothing but warnings and errors.
@@ -413,6 +413,18 @@ fn load_mesh(args: &MeshArgs) -> Result<Scene> {
 
 /// Writes the scene and prints the summary.
 fn write(scene: &Scene, out: &OutArgs, title: &str, note: &str) -> Result<()> {
+    if antiradiance::scene::gltf::is_gltf(&out.out) {
+        antiradiance::output::gltf::write_scene_glb(&out.out, scene)?;
+        if !out.quiet {
+            eprintln!(
+                "wrote {}: {} triangles{note}, {} emitting",
+                out.out.display(),
+                scene.len(),
+                scene.emitter_count()
+            );
+        }
+        return Ok(());
+    }
     generated::write_obj(scene, &out.out, title)?;
     if !out.quiet {
         eprintln!(

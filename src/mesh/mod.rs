@@ -6,6 +6,8 @@
 //! equations are linear in E), so the answer does not depend on where, how large or how bright
 //! the scene is, and f32 storage neither overflows nor underflows.
 
+pub mod lights;
+
 use glam::DVec3;
 
 use crate::error::{Error, Result};
@@ -61,6 +63,13 @@ pub struct Patches {
     /// Per input triangle, the earlier triangle it duplicates ([`Scene::duplicates`]): its
     /// patches are inactive and it takes that triangle's radiance.
     pub twin: Vec<Option<u32>>,
+    /// Per patch, the reflected direct radiance of the scene's analytic lights
+    /// ([`lights::direct_source`], normalized like `emission`): a source the solvers add
+    /// to the emission. Empty when the scene has no analytic light.
+    pub source: Vec<[f64; 3]>,
+    /// The scene's analytic lights in the unit frame, normalized like `emission` (what the
+    /// reference path tracer samples). Empty when there are none.
+    pub lights: Vec<crate::scene::lights::Light>,
 }
 
 impl Patches {
@@ -126,6 +135,18 @@ impl Patches {
                 }
             })
             .collect()
+    }
+
+    /// The solvers' source per patch: the emission plus the analytic lights' reflected direct
+    /// radiance ([`Patches::source`]), normalized units.
+    pub fn emission_and_source(&self) -> Vec<[f64; 3]> {
+        let mut e = self.emission.clone();
+        for (e, s) in e.iter_mut().zip(&self.source) {
+            for c in 0..3 {
+                e[c] += s[c];
+            }
+        }
+        e
     }
 
     /// Number of active (non-degenerate) patches.
@@ -280,5 +301,8 @@ pub fn build_patches(scene: &Scene, max_edge: Option<f64>) -> Patches {
         }
     }
     patches.first.push(patches.len() as u32);
+    if !scene.lights.is_empty() {
+        lights::attach(&mut patches, &scene.lights);
+    }
     patches
 }

@@ -1,4 +1,5 @@
-//! Stage 5: write results to disk (per-triangle CSV, coloured PLY mesh, JSON reports) and read
+//! Stage 5: write results to disk (per-triangle CSV, coloured PLY mesh, binary glTF, JSON
+//! reports) and read
 //! the CSV back.
 //!
 //! Every writer is atomic: the bytes go to a temporary file in the target's directory, which is
@@ -15,11 +16,13 @@ use std::path::Path;
 use crate::error::Result;
 
 pub mod csv;
+pub mod gltf;
 pub mod ply;
 pub mod render;
 
 pub use crate::files::{format_f64, write_atomic};
 pub use csv::{read_triangles_csv, write_triangles_csv, TRIANGLES_CSV_HEADER};
+pub use gltf::{write_baked_glb, write_scene_glb};
 pub use ply::write_ply;
 
 /// Writes a JSON value pretty-printed (two-space indentation) with a final line break.

@@ -175,6 +175,47 @@ impl<'a> Tracer<'a> {
     /// hemisphere of point `x` (normal `n`) on patch `here`, MIS-weighted against cosine sampling.
     fn direct(&self, x: DVec3, n: DVec3, here: usize, rng: &mut Rng) -> [f64; 3] {
         let (u, u1, u2) = (rng.next_f64(), rng.next_f64(), rng.next_f64());
+        let mut analytic = self.analytic(x, n, here);
+        if self.emitters.is_empty() {
+            return analytic;
+        }
+        let area = self.emitter_light(x, n, here, (u, u1, u2));
+        for c in 0..3 {
+            analytic[c] += area[c];
+        }
+        analytic
+    }
+
+    /// Next-event estimate from the analytic delta lights (point, spot, sun) at `x`: each
+    /// light's `E cos / pi` with one shadow ray (delta lights cannot be hit by bounce rays, so
+    /// no MIS weight). The sky is picked up by bounce rays that leave the scene.
+    fn analytic(&self, x: DVec3, n: DVec3, here: usize) -> [f64; 3] {
+        let mut sum = [0.0; 3];
+        for light in &self.patches.lights {
+            let Some((w, dist, e)) = light.towards(x) else {
+                continue;
+            };
+            let cos = n.dot(w);
+            if !(cos > 0.0) || e.iter().all(|&v| v <= 0.0) {
+                continue;
+            }
+            if self.rays.visible(x, w, dist.min(1e3), here, usize::MAX) {
+                for c in 0..3 {
+                    sum[c] += e[c] * cos / PI;
+                }
+            }
+        }
+        sum
+    }
+
+    /// Next-event estimate from the emitting patches (see [`Self::direct`]).
+    fn emitter_light(
+        &self,
+        x: DVec3,
+        n: DVec3,
+        here: usize,
+        (u, u1, u2): (f64, f64, f64),
+    ) -> [f64; 3] {
         if self.emitters.is_empty() {
             return [0.0; 3];
         }
@@ -237,6 +278,14 @@ impl<'a> Tracer<'a> {
                 break;
             }
             let Some(hit) = self.rays.closest(pos, dir, patch) else {
+                // Left the scene: the sky, if any, is seen along `dir`.
+                for light in &self.patches.lights {
+                    if let crate::scene::lights::Light::Sky { radiance: l } = light {
+                        for c in 0..3 {
+                            radiance[c] += beta[c] * l[c];
+                        }
+                    }
+                }
                 break;
             };
             let q = hit.patch;
@@ -285,7 +334,10 @@ impl<'a> Tracer<'a> {
     fn estimate_patch(&self, p: usize, spp: usize, seed: u64, max_depth: usize) -> [f64; 3] {
         let e = self.patches.emission[p];
         let rho = self.patches.albedo[p];
-        if !self.patches.active[p] || rho.iter().all(|&r| r <= 0.0) || self.emitters.is_empty() {
+        if !self.patches.active[p]
+            || rho.iter().all(|&r| r <= 0.0)
+            || (self.emitters.is_empty() && self.patches.lights.is_empty())
+        {
             return e;
         }
         let tri = self.patches.corners[p];

@@ -733,5 +733,6 @@ fn append(object: &Scene, extra: Builder) -> Scene {
         material_names: names,
         warnings: Vec::new(),
         camera: None,
+        lights: object.lights.clone(),
     }
 }

@@ -1,4 +1,5 @@
-//! Stage 1: load an OBJ+MTL scene into a flat list of input triangles with materials.
+//! Stage 1: load an OBJ+MTL or glTF 2.0 scene into a flat list of input triangles with
+//! materials (textures averaged per triangle, [`texture`]) and analytic lights ([`lights`]).
 //!
 //! Polygons are fan-triangulated in file order; a triangle's index is its position in that order,
 //! and this order is the contract for every per-triangle output. Positions are kept in f64 so that a
@@ -6,8 +7,11 @@
 //! `file:line: message` before tobj ever sees the file (tobj 4.0.5 panics on some malformed lines).
 
 pub mod generated;
+pub mod gltf;
 pub mod interiors;
+pub mod lights;
 mod obj;
+pub mod texture;
 pub mod variants;
 pub mod write_obj;
 
@@ -97,6 +101,9 @@ pub struct Scene {
     /// `# camera eye X Y Z target X Y Z fov DEG`, see [`SceneCamera::parse`]); a picture of the
     /// scene uses it unless told otherwise.
     pub camera: Option<SceneCamera>,
+    /// Analytic lights (point, spot, sun, sky) in the scene's frame, radiometric units
+    /// ([`lights`]); from glTF's `KHR_lights_punctual` or the command line.
+    pub lights: Vec<lights::Light>,
 }
 
 /// A camera stored with a scene: where the eye is, what it looks at, the vertical field of view.
@@ -192,6 +199,20 @@ pub struct TriangleShapes {
 
 pub use crate::geometry::tolerances::DEGENERATE_SIN;
 pub use obj::load_obj;
+
+/// Largest albedo the loaders keep from a texture or a glTF factor (the model needs albedo
+/// below 1); higher values are lowered to it with a warning.
+pub const ALBEDO_MAX: f64 = 0.99;
+
+/// Reads a scene file: glTF 2.0 (`.gltf`, `.glb`, see [`gltf::load_gltf`]) by its extension,
+/// Wavefront OBJ ([`load_obj`]) otherwise.
+pub fn load_scene(path: &std::path::Path, options: &SceneOptions) -> Result<Scene> {
+    if gltf::is_gltf(path) {
+        gltf::load_gltf(path, options)
+    } else {
+        load_obj(path, options)
+    }
+}
 
 impl Scene {
     /// Number of input triangles.

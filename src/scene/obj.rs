@@ -87,6 +87,7 @@ pub fn load_obj(path: &Path, options: &SceneOptions) -> Result<Scene> {
         });
     }
 
+    super::texture::apply_obj_textures(&mut scene, path, text, &mut warnings);
     if let Some(y) = options.emit_above {
         for t in 0..scene.len() {
             if scene.corners(t).iter().all(|p| p.y > y) {

@@ -75,7 +75,7 @@ pub fn solve_dense(
         .collect();
     let active: Vec<usize> = (0..n).filter(|&p| patches.active[p]).collect();
 
-    let emission = &patches.emission;
+    let emission = &patches.emission_and_source();
     let mut radiance: Vec<[f64; 3]> = emission.clone();
     let mut anti = vec![[0.0f32; 3]; n * nb];
     let mut next_radiance = radiance.clone();

@@ -125,9 +125,11 @@ impl Relighter {
     /// Errors: [`Error::Parameter`] for invalid `options`, a `max_edge` that is not a finite
     /// positive length or would make more than [`mesh::MAX_PATCHES`] patches, or invalid
     /// emission in the scene; [`Error::Scene`] for a scene without triangles, with a non-finite vertex or a
-    /// vertex index out of range.
+    /// vertex index out of range, or with analytic lights ([`Scene::lights`]: the relighter
+    /// animates emitting triangles only).
     pub fn new(scene: &Scene, max_edge: Option<f64>, options: &SolverOptions) -> Result<Relighter> {
         let start = Instant::now();
+        check_no_lights(scene)?;
         let patches = mesh::checked_patches(scene, max_edge)?;
         options.validate()?;
         let mut relighter = Relighter::from_patches(scene, patches, options)?;
@@ -147,6 +149,7 @@ impl Relighter {
     ) -> Result<Relighter> {
         let start = Instant::now();
         mesh::check_scene(scene)?;
+        check_no_lights(scene)?;
         options.validate()?;
         if patches.first.len() != scene.len() + 1
             || patches.parent.len() != patches.len()
@@ -525,6 +528,20 @@ fn check_radiance(rgb: [f64; 3], what: impl FnOnce() -> String) -> Result<()> {
             rgb[2]
         )))
     }
+}
+
+/// The relighter animates emitting triangles only: a scene with analytic lights is refused.
+fn check_no_lights(scene: &Scene) -> Result<()> {
+    if scene.lights.is_empty() {
+        return Ok(());
+    }
+    Err(Error::Scene {
+        path: scene.path.clone(),
+        message: format!(
+            "{} analytic lights (point, spot, sun, sky): the relighter animates emitting triangles only",
+            scene.lights.len()
+        ),
+    })
 }
 
 // ---------------------------------------------------------------------------------------------

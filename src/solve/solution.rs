@@ -256,7 +256,8 @@ pub fn source_and_albedo_max(patches: &Patches) -> (f64, f64) {
     let mut rho_max = 0.0f64;
     for p in (0..patches.len()).filter(|&p| patches.active[p]) {
         for c in 0..3 {
-            e_max = e_max.max(patches.emission[p][c].abs());
+            let s = patches.source.get(p).map_or(0.0, |s| s[c]);
+            e_max = e_max.max((patches.emission[p][c] + s).abs());
             rho_max = rho_max.max(patches.albedo[p][c]);
         }
     }

@@ -1,8 +1,8 @@
 //! The warnings of a solve: what did not fail but is less accurate than asked.
 
 use crate::error::{Warning, WarningKind};
-use crate::mesh::Patches;
 use crate::memory::format_bytes;
+use crate::mesh::Patches;
 use crate::solve::solution::{self, SolveStats};
 use crate::solve::{budget, direct, SolverKind, SolverOptions};
 

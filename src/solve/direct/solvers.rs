@@ -41,6 +41,18 @@ pub(super) fn add_emission(
         .collect()
 }
 
+/// Adds the analytic lights' reflected direct radiance ([`Patches::source`], per patch) to the
+/// receivers' source.
+fn add_light_source(patches: &Patches, receivers: &[Element], source: &mut [[f64; 3]]) {
+    for (r, d) in receivers.iter().zip(source.iter_mut()) {
+        if let Some(s) = patches.source.get(r.patch as usize) {
+            for c in 0..3 {
+                d[c] += s[c];
+            }
+        }
+    }
+}
+
 /// The active patches as receivers (what the dense solver works on).
 pub(super) fn patch_receivers(patches: &Patches) -> Vec<Element> {
     (0..patches.len())
@@ -111,7 +123,8 @@ pub fn solve_hierarchical_direct(
         return Ok(skip(prepared, None));
     }
     prepared.note_memory(bytes, None);
-    let source = direct.reflected(&receivers, progress);
+    let mut source = direct.reflected(&receivers, progress);
+    add_light_source(patches, &receivers, &mut source);
     drop(direct);
     prepared.timings.direct = t_direct.elapsed().as_secs_f64();
     let (reflected, state) = prepared.solve_with_source(patches, &source, None, progress);
@@ -160,9 +173,11 @@ pub fn solve_dense_direct(
         drop(direct);
         return skip(None);
     }
-    let source = direct.reflected(&receivers, progress);
+    let mut source = direct.reflected(&receivers, progress);
+    add_light_source(patches, &receivers, &mut source);
     drop(direct);
     let mut with_source = patches.clone();
+    with_source.source = Vec::new();
     with_source.emission = vec![[0.0; 3]; patches.len()];
     for (r, d) in receivers.iter().zip(&source) {
         with_source.emission[r.patch as usize] = *d;

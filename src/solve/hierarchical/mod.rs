@@ -157,7 +157,8 @@ pub fn link_params(options: &SolverOptions) -> LinkParams {
 /// direct light reflected by their albedos: 1 when every albedo and emission is grey, else 3.
 fn channels_needed(patches: &Patches) -> usize {
     let grey = (0..patches.len())
-        .all(|p| model::is_grey(patches.albedo[p]) && model::is_grey(patches.emission[p]));
+        .all(|p| model::is_grey(patches.albedo[p]) && model::is_grey(patches.emission[p]))
+        && patches.source.iter().all(|&s| model::is_grey(s));
     if grey {
         1
     } else {
@@ -437,7 +438,7 @@ impl Prepared {
 
     /// Solves with the patches' own emission.
     pub fn solve(&mut self, patches: &Patches, progress: &Progress) -> (Solution, ElementState) {
-        self.solve_with_emission(patches, &patches.emission, None, progress)
+        self.solve_with_emission(patches, &patches.emission_and_source(), None, progress)
     }
 
     /// Solves for a given per-patch emission (normalized units, as in `Patches::emission`),

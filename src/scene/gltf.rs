@@ -1,0 +1,957 @@
+//! Stage 1 for glTF 2.0: `.gltf` (with `.bin` files or base64 `data:` URIs) and `.glb`.
+//!
+//! What is read, and how it maps to the model:
+//!
+//! - **Triangles**: every primitive of every mesh instanced by a node of the default scene (the
+//!   file's `scene`, else its first scene), positions through the node's world transform
+//!   (parent x child, a node's own transform as translation x rotation x scale or its
+//!   `matrix`). TRIANGLES primitives as they are, TRIANGLE_STRIP and TRIANGLE_FAN converted by
+//!   the specification's formulas; POINTS and LINES primitives are skipped with a warning.
+//!   Under a transform with a negative determinant (a mirror) the triangles' corner order is
+//!   reversed, so that counter-clockwise stays the front side, as glTF prescribes.
+//! - **Triangle order**, the contract of every per-triangle output: nodes in depth-first
+//!   order of the scene (a root, then its children in the order they are listed, then the next
+//!   root), primitives in mesh order, triangles in index order.
+//! - **Albedo**: `baseColorFactor` (linear RGB) times the mean of `baseColorTexture` over the
+//!   triangle's UV footprint ([`crate::scene::texture`]: sRGB decoded, the sampler's wrap modes)
+//!   times the mean of the corners' `COLOR_0`; a primitive without a material takes the grey
+//!   `--albedo`. Alpha, metallic-roughness, normal maps and transmission are not modelled.
+//!   The model needs albedo below 1: values at or above [`ALBEDO_MAX`] are lowered to it, with
+//!   a warning naming the material.
+//! - **Emission**: `emissiveFactor` x the mean of `emissiveTexture` x
+//!   `KHR_materials_emissive_strength`, read as luminance in cd/m^2 (nits) and divided by
+//!   [`LUMENS_PER_WATT`] into radiance, W / (m^2 sr).
+//! - **Lights** (`KHR_lights_punctual`), through their nodes' transforms: point and spot lights
+//!   (candela) become [`Light::Point`] / [`Light::Spot`] with intensity cd / 683 W/sr,
+//!   directional lights (lux) become [`Light::Sun`] with irradiance lux / 683 W/m^2. A light's
+//!   `range` is ignored (with a warning): the model's lights fall off as 1 / r^2 everywhere.
+//! - `doubleSided` materials are solved one-sided (front = counter-clockwise), with a warning.
+//!
+//! Bad files give one-line errors naming the file and, where known, the JSON path (for example
+//! `meshes[0].primitives[1].indices`) or byte offset: bad GLB header or truncated file, JSON
+//! errors, failed validation (unsupported required extensions included), missing or short
+//! buffers and images, accessors outside their buffer, non-finite positions, indices out of
+//! range, no triangles. Accessors are read by this module, bounds checked, never by a reader
+//! that may panic.
+
+use std::collections::{HashMap, HashSet};
+use std::path::Path;
+
+use base64::Engine;
+use glam::{DMat4, DQuat, DVec3};
+use gltf::accessor::{DataType, Dimensions};
+use gltf::mesh::Mode;
+
+use crate::error::{Error, Result, Warning, WarningKind};
+use crate::scene::lights::{Light, LUMENS_PER_WATT};
+use crate::scene::texture::{Sampling, Texture, Wrap};
+use crate::scene::{Scene, SceneOptions, ALBEDO_MAX};
+
+/// Most elements of an accessor without a buffer view (zeros, optionally with sparse values).
+const MAX_VIEWLESS: usize = 1 << 26;
+
+fn scene_err(path: &Path, message: impl Into<String>) -> Error {
+    Error::Scene {
+        path: path.to_path_buf(),
+        message: message.into(),
+    }
+}
+
+/// True when `path` names a glTF file (`.gltf` or `.glb`, any case).
+pub fn is_gltf(path: &Path) -> bool {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("gltf") || e.eq_ignore_ascii_case("glb"))
+}
+
+/// Checks a binary glTF's 12-byte header and chunk headers before the parser sees them.
+fn check_glb(path: &Path, bytes: &[u8]) -> Result<()> {
+    if bytes.len() < 12 {
+        return Err(scene_err(
+            path,
+            format!(
+                "truncated GLB: {} bytes, the header alone has 12",
+                bytes.len()
+            ),
+        ));
+    }
+    let word =
+        |at: usize| u32::from_le_bytes([bytes[at], bytes[at + 1], bytes[at + 2], bytes[at + 3]]);
+    let version = word(4);
+    if version != 2 {
+        return Err(scene_err(
+            path,
+            format!("GLB version {version} at byte 4 (only glTF 2.0 is read)"),
+        ));
+    }
+    let length = word(8) as usize;
+    if length < 20 {
+        return Err(scene_err(
+            path,
+            format!("GLB length {length} at byte 8 is too small for a JSON chunk"),
+        ));
+    }
+    if length > bytes.len() {
+        return Err(scene_err(
+            path,
+            format!(
+                "truncated GLB: the header at byte 8 says {length} bytes, the file has {}",
+                bytes.len()
+            ),
+        ));
+    }
+    let mut at = 12usize;
+    let mut chunk = 0;
+    while at < length {
+        if at + 8 > length {
+            return Err(scene_err(
+                path,
+                format!("truncated GLB: chunk {chunk} header at byte {at} is cut off"),
+            ));
+        }
+        let chunk_len = word(at) as usize;
+        if at + 8 + chunk_len > length {
+            return Err(scene_err(
+                path,
+                format!(
+                    "truncated GLB: chunk {chunk} at byte {at} says {chunk_len} bytes, {} remain",
+                    length - at - 8
+                ),
+            ));
+        }
+        at += 8 + chunk_len;
+        chunk += 1;
+    }
+    Ok(())
+}
+
+/// Decodes `%XX` escapes of a relative URI.
+fn percent_decode(uri: &str) -> String {
+    let bytes = uri.as_bytes();
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut i = 0;
+    while i < bytes.len() {
+        if bytes[i] == b'%' && i + 2 < bytes.len() {
+            let hex = std::str::from_utf8(&bytes[i + 1..i + 3])
+                .ok()
+                .and_then(|h| u8::from_str_radix(h, 16).ok());
+            if let Some(b) = hex {
+                out.push(b);
+                i += 3;
+                continue;
+            }
+        }
+        out.push(bytes[i]);
+        i += 1;
+    }
+    String::from_utf8_lossy(&out).into_owned()
+}
+
+/// The bytes a URI names: a base64 `data:` URI, or a file relative to the glTF file.
+fn read_uri(path: &Path, base: &Path, uri: &str, what: &str) -> Result<Vec<u8>> {
+    if let Some(rest) = uri.strip_prefix("data:") {
+        let Some((_, data)) = rest.split_once(";base64,") else {
+            return Err(scene_err(
+                path,
+                format!("{what}: data URI is not base64 (only ';base64,' data URIs are read)"),
+            ));
+        };
+        return base64::engine::general_purpose::STANDARD
+            .decode(data.trim())
+            .map_err(|e| scene_err(path, format!("{what}: bad base64 in data URI: {e}")));
+    }
+    if uri.contains("://") {
+        return Err(scene_err(
+            path,
+            format!("{what}: URI '{uri}' is not a relative file (no network access)"),
+        ));
+    }
+    let file = base.join(percent_decode(uri));
+    std::fs::read(&file).map_err(|e| {
+        scene_err(
+            path,
+            format!("{what}: cannot read '{}': {e}", file.display()),
+        )
+    })
+}
+
+/// An accessor's values as f64 rows of `N` components, bounds checked, sparse applied,
+/// normalized integers mapped to [0, 1] (or [-1, 1]).
+fn read_accessor<const N: usize>(
+    path: &Path,
+    accessor: &gltf::Accessor,
+    buffers: &[Vec<u8>],
+    what: &str,
+) -> Result<Vec<[f64; N]>> {
+    let fail = |m: String| {
+        scene_err(
+            path,
+            format!("{what} (accessors[{}]): {m}", accessor.index()),
+        )
+    };
+    let dims = match accessor.dimensions() {
+        Dimensions::Scalar => 1,
+        Dimensions::Vec2 => 2,
+        Dimensions::Vec3 => 3,
+        Dimensions::Vec4 => 4,
+        other => {
+            return Err(fail(format!(
+                "type {other:?} where {N} components are needed"
+            )))
+        }
+    };
+    if dims < N {
+        return Err(fail(format!("{dims} components where {N} are needed")));
+    }
+    let ty = accessor.data_type();
+    let size = ty.size();
+    let elem = size * dims;
+    let count = accessor.count();
+    let normalized = accessor.normalized();
+    let decode = |b: &[u8]| -> f64 {
+        match ty {
+            DataType::F32 => f32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64,
+            DataType::U8 => {
+                let v = b[0] as f64;
+                if normalized {
+                    v / 255.0
+                } else {
+                    v
+                }
+            }
+            DataType::I8 => {
+                let v = b[0] as i8 as f64;
+                if normalized {
+                    (v / 127.0).max(-1.0)
+                } else {
+                    v
+                }
+            }
+            DataType::U16 => {
+                let v = u16::from_le_bytes([b[0], b[1]]) as f64;
+                if normalized {
+                    v / 65535.0
+                } else {
+                    v
+                }
+            }
+            DataType::I16 => {
+                let v = i16::from_le_bytes([b[0], b[1]]) as f64;
+                if normalized {
+                    (v / 32767.0).max(-1.0)
+                } else {
+                    v
+                }
+            }
+            DataType::U32 => u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64,
+        }
+    };
+    // (data of the view, stride) after checking the view against its buffer.
+    let view_data = |view: &gltf::buffer::View, elem: usize| -> Result<(&[u8], usize)> {
+        let buffer = buffers.get(view.buffer().index()).ok_or_else(|| {
+            fail(format!(
+                "bufferViews[{}] names a missing buffer",
+                view.index()
+            ))
+        })?;
+        let end = view.offset().checked_add(view.length());
+        let Some(data) = end.and_then(|end| buffer.get(view.offset()..end)) else {
+            return Err(fail(format!(
+                "bufferViews[{}] (bytes {}..{}) lies outside buffers[{}] ({} bytes)",
+                view.index(),
+                view.offset(),
+                view.offset().saturating_add(view.length()),
+                view.buffer().index(),
+                buffer.len()
+            )));
+        };
+        let stride = view.stride().unwrap_or(elem);
+        if stride < elem {
+            return Err(fail(format!(
+                "bufferViews[{}] byteStride {stride} is smaller than an element ({elem} bytes)",
+                view.index()
+            )));
+        }
+        Ok((data, stride))
+    };
+    let slice_rows = |data: &[u8],
+                      offset: usize,
+                      stride: usize,
+                      n: usize,
+                      elem: usize,
+                      view: usize|
+     -> Result<()> {
+        if n == 0 {
+            return Ok(());
+        }
+        let need = (n - 1)
+            .checked_mul(stride)
+            .and_then(|x| x.checked_add(offset))
+            .and_then(|x| x.checked_add(elem));
+        match need {
+            Some(need) if need <= data.len() => Ok(()),
+            _ => Err(fail(format!(
+                "{n} elements from byte {offset} with stride {stride} need more than the {} bytes of bufferViews[{view}]",
+                data.len()
+            ))),
+        }
+    };
+    let view = accessor.view();
+    if let Some(view) = &view {
+        let (data, stride) = view_data(view, elem)?;
+        slice_rows(data, accessor.offset(), stride, count, elem, view.index())?;
+    } else if count > MAX_VIEWLESS {
+        // Elements without a buffer view are zeros (and sparse values): no buffer bounds them.
+        return Err(fail(format!(
+            "{count} elements without a buffer view (at most {MAX_VIEWLESS})"
+        )));
+    }
+    let mut rows = vec![[0.0f64; N]; count];
+    if let Some(view) = view {
+        let (data, stride) = view_data(&view, elem)?;
+        for (i, row) in rows.iter_mut().enumerate() {
+            let at = accessor.offset() + i * stride;
+            for (k, x) in row.iter_mut().enumerate() {
+                *x = decode(&data[at + k * size..]);
+            }
+        }
+    }
+    if let Some(sparse) = accessor.sparse() {
+        let n = sparse.count();
+        let indices = sparse.indices();
+        let isize = indices.index_type().size();
+        let (idata, istride) = view_data(&indices.view(), isize)?;
+        let istride = if indices.view().stride().is_some() {
+            istride
+        } else {
+            isize
+        };
+        slice_rows(
+            idata,
+            indices.offset(),
+            istride,
+            n,
+            isize,
+            indices.view().index(),
+        )?;
+        let values = sparse.values();
+        let (vdata, vstride) = view_data(&values.view(), elem)?;
+        let vstride = if values.view().stride().is_some() {
+            vstride
+        } else {
+            elem
+        };
+        slice_rows(
+            vdata,
+            values.offset(),
+            vstride,
+            n,
+            elem,
+            values.view().index(),
+        )?;
+        for s in 0..n {
+            let at = indices.offset() + s * istride;
+            let b = &idata[at..];
+            let index = match isize {
+                1 => b[0] as usize,
+                2 => u16::from_le_bytes([b[0], b[1]]) as usize,
+                _ => u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize,
+            };
+            if index >= count {
+                return Err(fail(format!(
+                    "sparse index {index} out of range ({count} elements)"
+                )));
+            }
+            let vat = values.offset() + s * vstride;
+            for k in 0..N {
+                rows[index][k] = decode(&vdata[vat + k * size..]);
+            }
+        }
+    }
+    Ok(rows)
+}
+
+/// A node's own transform in f64.
+fn local_matrix(node: &gltf::Node) -> DMat4 {
+    match node.transform() {
+        gltf::scene::Transform::Matrix { matrix } => {
+            DMat4::from_cols_array_2d(&matrix.map(|c| c.map(f64::from)))
+        }
+        gltf::scene::Transform::Decomposed {
+            translation,
+            rotation,
+            scale,
+        } => {
+            let [x, y, z, w] = rotation.map(f64::from);
+            let q = DQuat::from_xyzw(x, y, z, w);
+            let q = if q.length() > 0.0 {
+                q.normalize()
+            } else {
+                DQuat::IDENTITY
+            };
+            DMat4::from_scale_rotation_translation(
+                DVec3::from_array(scale.map(f64::from)),
+                q,
+                DVec3::from_array(translation.map(f64::from)),
+            )
+        }
+    }
+}
+
+/// A material's colours and textures, resolved once.
+struct MaterialInfo {
+    name: String,
+    base: [f64; 3],
+    base_texture: Option<(usize, u32, Sampling)>,
+    emission: [f64; 3],
+    emissive_texture: Option<(usize, u32, Sampling)>,
+}
+
+fn sampling_of(sampler: &gltf::texture::Sampler) -> Sampling {
+    use gltf::texture::{MagFilter, WrappingMode};
+    let wrap = |m: WrappingMode| match m {
+        WrappingMode::Repeat => Wrap::Repeat,
+        WrappingMode::MirroredRepeat => Wrap::Mirror,
+        WrappingMode::ClampToEdge => Wrap::Clamp,
+    };
+    Sampling {
+        wrap_u: wrap(sampler.wrap_s()),
+        wrap_v: wrap(sampler.wrap_t()),
+        nearest: sampler.mag_filter() == Some(MagFilter::Nearest),
+    }
+}
+
+/// Loads a glTF 2.0 scene (see the module doc). `options.default_albedo` is the albedo of
+/// primitives without a material; `options.emit_above` and `options.emission` apply as for
+/// OBJ scenes.
+pub fn load_gltf(path: &Path, options: &SceneOptions) -> Result<Scene> {
+    options.validate()?;
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    if bytes.starts_with(b"glTF") {
+        check_glb(path, &bytes)?;
+    } else if bytes.iter().take(64).all(|b| b.is_ascii_whitespace()) {
+        return Err(scene_err(path, "empty file"));
+    } else if !bytes
+        .iter()
+        .find(|b| !b.is_ascii_whitespace())
+        .is_some_and(|&b| b == b'{')
+    {
+        return Err(scene_err(
+            path,
+            "not glTF: neither the GLB magic 'glTF' at byte 0 nor a JSON object",
+        ));
+    }
+    let gltf_error = |e: gltf::Error| match e {
+        gltf::Error::Validation(list) => {
+            let (p, err) = &list[0];
+            let more = if list.len() > 1 {
+                format!(" (and {} more problems)", list.len() - 1)
+            } else {
+                String::new()
+            };
+            let what = match err {
+                gltf::json::validation::Error::Unsupported => {
+                    "unsupported extension required".to_string()
+                }
+                other => other.to_string().to_lowercase(),
+            };
+            scene_err(path, format!("invalid glTF at {p}: {what}{more}"))
+        }
+        gltf::Error::Deserialize(e) => scene_err(
+            path,
+            format!(
+                "invalid glTF JSON at line {}, column {}: {e}",
+                e.line(),
+                e.column()
+            ),
+        ),
+        other => scene_err(path, format!("invalid glTF: {other}")),
+    };
+    // Parsed first, validated after our own check of the POSITION references (gltf-json 1.4.1's
+    // validation indexes the accessors with them unchecked, and panics on a bad one).
+    let raw = gltf::Gltf::from_slice_without_validation(&bytes).map_err(gltf_error)?;
+    {
+        let root = raw.document.as_json();
+        for (m, mesh) in root.meshes.iter().enumerate() {
+            for (k, prim) in mesh.primitives.iter().enumerate() {
+                for (semantic, index) in &prim.attributes {
+                    if index.value() >= root.accessors.len() {
+                        let name = match semantic {
+                            gltf::json::validation::Checked::Valid(s) => s.to_string(),
+                            gltf::json::validation::Checked::Invalid => "?".to_string(),
+                        };
+                        return Err(scene_err(
+                            path,
+                            format!(
+                                "invalid glTF at meshes[{m}].primitives[{k}].attributes.{name}: accessor {} does not exist ({} accessors)",
+                                index.value(),
+                                root.accessors.len()
+                            ),
+                        ));
+                    }
+                }
+            }
+        }
+    }
+    let blob = raw.blob;
+    let document = gltf::Document::from_json(raw.document.into_json()).map_err(gltf_error)?;
+    let base = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+    let doc = &document;
+    let mut warnings: Vec<Warning> = Vec::new();
+    let warn = |w: &mut Vec<Warning>, kind: WarningKind, m: String| {
+        w.push(Warning::in_file(kind, path, None, m))
+    };
+
+    // Buffers.
+    let mut buffers: Vec<Vec<u8>> = Vec::new();
+    for buffer in doc.buffers() {
+        let what = format!("buffers[{}]", buffer.index());
+        let data = match buffer.source() {
+            gltf::buffer::Source::Bin => blob.clone().ok_or_else(|| {
+                scene_err(
+                    path,
+                    format!("{what}: refers to the GLB binary chunk, which is missing"),
+                )
+            })?,
+            gltf::buffer::Source::Uri(uri) => read_uri(path, &base, uri, &what)?,
+        };
+        if data.len() < buffer.length() {
+            return Err(scene_err(
+                path,
+                format!(
+                    "{what}: byteLength {} but only {} bytes are there",
+                    buffer.length(),
+                    data.len()
+                ),
+            ));
+        }
+        buffers.push(data);
+    }
+
+    for ext in doc.extensions_used() {
+        if ext == "KHR_texture_transform" {
+            warn(&mut warnings, WarningKind::Unsupported, "KHR_texture_transform is used but not applied: textures are averaged with untransformed UVs".into());
+        }
+    }
+
+    // Materials, and the images they use (decoded once).
+    let mut images: HashMap<usize, Texture> = HashMap::new();
+    let mut load_image = |image: gltf::Image, what: &str| -> Result<usize> {
+        let index = image.index();
+        if images.contains_key(&index) {
+            return Ok(index);
+        }
+        let what = format!("{what} (images[{index}])");
+        // Read from the JSON: gltf 1.4.1's `Image::source` panics on an image with a buffer
+        // view but no MIME type, or with neither a URI nor a buffer view.
+        let json = &doc.as_json().images[index];
+        let (bytes, name) = if let Some(v) = json.buffer_view {
+            let view = doc
+                .views()
+                .nth(v.value())
+                .ok_or_else(|| scene_err(path, format!("{what}: missing buffer view")))?;
+            let buffer = buffers
+                .get(view.buffer().index())
+                .ok_or_else(|| scene_err(path, format!("{what}: missing buffer")))?;
+            let end = view.offset().checked_add(view.length());
+            let data = end
+                .and_then(|end| buffer.get(view.offset()..end))
+                .ok_or_else(|| {
+                    scene_err(
+                        path,
+                        format!(
+                            "{what}: bufferViews[{}] lies outside its buffer",
+                            view.index()
+                        ),
+                    )
+                })?;
+            (data.to_vec(), String::new())
+        } else if let Some(uri) = &json.uri {
+            (read_uri(path, &base, uri, &what)?, uri.clone())
+        } else {
+            return Err(scene_err(
+                path,
+                format!("{what}: neither a uri nor a bufferView"),
+            ));
+        };
+        let texture = Texture::decode(&bytes, &name, true)
+            .map_err(|e| scene_err(path, format!("{what}: {e}")))?;
+        images.insert(index, texture);
+        Ok(index)
+    };
+    let mut materials: Vec<MaterialInfo> = Vec::new();
+    for m in doc.materials() {
+        let i = m.index().unwrap_or(materials.len());
+        let name = m
+            .name()
+            .map(str::to_string)
+            .unwrap_or_else(|| format!("material{i}"));
+        let pbr = m.pbr_metallic_roughness();
+        let bf = pbr.base_color_factor();
+        let base_texture = match pbr.base_color_texture() {
+            Some(info) => Some((
+                load_image(
+                    info.texture().source(),
+                    &format!("materials[{i}].pbrMetallicRoughness.baseColorTexture"),
+                )?,
+                info.tex_coord(),
+                sampling_of(&info.texture().sampler()),
+            )),
+            None => None,
+        };
+        let strength = m.emissive_strength().map(f64::from).unwrap_or(1.0);
+        let ef = m.emissive_factor();
+        let emissive_texture = match m.emissive_texture() {
+            Some(info) => Some((
+                load_image(
+                    info.texture().source(),
+                    &format!("materials[{i}].emissiveTexture"),
+                )?,
+                info.tex_coord(),
+                sampling_of(&info.texture().sampler()),
+            )),
+            None => None,
+        };
+        let emission = ef.map(|e| f64::from(e) * strength / LUMENS_PER_WATT);
+        let base = [bf[0], bf[1], bf[2]].map(f64::from);
+        if base
+            .iter()
+            .chain(&emission)
+            .any(|x| !x.is_finite() || *x < 0.0)
+        {
+            return Err(scene_err(
+                path,
+                format!("materials[{i}] ('{name}'): colour factors must be finite and >= 0"),
+            ));
+        }
+        if m.double_sided() {
+            warn(
+                &mut warnings,
+                WarningKind::Unsupported,
+                format!("material '{name}' is doubleSided: solved one-sided (front = counter-clockwise), its back absorbs"),
+            );
+        }
+        materials.push(MaterialInfo {
+            name,
+            base,
+            base_texture,
+            emission,
+            emissive_texture,
+        });
+    }
+    drop(load_image);
+
+    let Some(gscene) = doc.default_scene().or_else(|| doc.scenes().next()) else {
+        return Err(scene_err(path, "no scene (the file defines no scenes)"));
+    };
+
+    let mut scene = Scene {
+        path: path.to_path_buf(),
+        material_names: materials.iter().map(|m| m.name.clone()).collect(),
+        ..Scene::default()
+    };
+    let mut clamped: HashMap<String, usize> = HashMap::new();
+    let mut skipped_modes: HashSet<String> = HashSet::new();
+    let mut visited: HashSet<usize> = HashSet::new();
+    // Depth-first, children in order: a stack of (node, parent's world matrix), reversed.
+    let mut stack: Vec<(gltf::Node, DMat4)> =
+        gscene.nodes().map(|n| (n, DMat4::IDENTITY)).collect();
+    stack.reverse();
+    while let Some((node, parent)) = stack.pop() {
+        if !visited.insert(node.index()) {
+            return Err(scene_err(
+                path,
+                format!("nodes[{}] is reached twice (a node may have one parent; the hierarchy has a cycle or a shared child)", node.index()),
+            ));
+        }
+        let world = parent * local_matrix(&node);
+        if !world.is_finite() {
+            return Err(scene_err(
+                path,
+                format!("nodes[{}]: transform is not finite", node.index()),
+            ));
+        }
+        for child in node.children().collect::<Vec<_>>().into_iter().rev() {
+            stack.push((child, world));
+        }
+        if let Some(light) = node.light() {
+            let li = light.index();
+            let color = light.color().map(f64::from);
+            let intensity = f64::from(light.intensity());
+            let rgb = color.map(|c| c * intensity / LUMENS_PER_WATT);
+            let position = world.transform_point3(DVec3::ZERO);
+            let axis = world.transform_vector3(DVec3::NEG_Z);
+            let l = match light.kind() {
+                gltf::khr_lights_punctual::Kind::Point => Light::Point {
+                    position,
+                    intensity: rgb,
+                },
+                gltf::khr_lights_punctual::Kind::Spot {
+                    inner_cone_angle,
+                    outer_cone_angle,
+                } => Light::Spot {
+                    position,
+                    direction: axis.normalize_or_zero(),
+                    intensity: rgb,
+                    inner: f64::from(inner_cone_angle),
+                    outer: f64::from(outer_cone_angle),
+                },
+                gltf::khr_lights_punctual::Kind::Directional => Light::Sun {
+                    direction: axis.normalize_or_zero(),
+                    irradiance: rgb,
+                },
+            };
+            l.validate(&format!(
+                "{}: KHR_lights_punctual.lights[{li}] (nodes[{}])",
+                path.display(),
+                node.index()
+            ))
+            .map_err(|e| {
+                scene_err(
+                    path,
+                    e.to_string()
+                        .trim_start_matches("invalid parameter: ")
+                        .to_string(),
+                )
+            })?;
+            if light.range().is_some() {
+                warn(&mut warnings, WarningKind::Unsupported, format!("KHR_lights_punctual.lights[{li}]: range is ignored (lights fall off as 1/r^2 everywhere)"));
+            }
+            scene.lights.push(l);
+        }
+        let Some(mesh) = node.mesh() else { continue };
+        let mirrored = world.determinant() < 0.0;
+        for prim in mesh.primitives() {
+            let jp = format!("meshes[{}].primitives[{}]", mesh.index(), prim.index());
+            let mode = prim.mode();
+            if !matches!(
+                mode,
+                Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+            ) {
+                skipped_modes.insert(format!("{jp} ({mode:?})"));
+                continue;
+            }
+            let Some(pos_acc) = prim.get(&gltf::Semantic::Positions) else {
+                return Err(scene_err(path, format!("{jp}: no POSITION attribute")));
+            };
+            if pos_acc.data_type() != DataType::F32 || pos_acc.dimensions() != Dimensions::Vec3 {
+                return Err(scene_err(
+                    path,
+                    format!("{jp}.attributes.POSITION: must be VEC3 FLOAT"),
+                ));
+            }
+            let local = read_accessor::<3>(
+                path,
+                &pos_acc,
+                &buffers,
+                &format!("{jp}.attributes.POSITION"),
+            )?;
+            let nverts = local.len();
+            if let Some(v) = local.iter().position(|p| p.iter().any(|x| !x.is_finite())) {
+                return Err(scene_err(
+                    path,
+                    format!("{jp}.attributes.POSITION: vertex {v} is not finite"),
+                ));
+            }
+            let indices: Vec<usize> = match prim.indices() {
+                Some(acc) => {
+                    if !matches!(
+                        acc.data_type(),
+                        DataType::U8 | DataType::U16 | DataType::U32
+                    ) || acc.dimensions() != Dimensions::Scalar
+                    {
+                        return Err(scene_err(
+                            path,
+                            format!("{jp}.indices: must be unsigned integer scalars"),
+                        ));
+                    }
+                    let raw = read_accessor::<1>(path, &acc, &buffers, &format!("{jp}.indices"))?;
+                    let mut out = Vec::with_capacity(raw.len());
+                    for (k, r) in raw.iter().enumerate() {
+                        let i = r[0] as usize;
+                        if i >= nverts {
+                            return Err(scene_err(
+                                path,
+                                format!("{jp}.indices: index {i} at position {k} out of range ({nverts} vertices)"),
+                            ));
+                        }
+                        out.push(i);
+                    }
+                    out
+                }
+                None => (0..nverts).collect(),
+            };
+            let tris: Vec<[usize; 3]> = match mode {
+                Mode::Triangles => indices
+                    .chunks_exact(3)
+                    .map(|c| [c[0], c[1], c[2]])
+                    .collect(),
+                Mode::TriangleStrip => (0..indices.len().saturating_sub(2))
+                    .map(|i| [indices[i], indices[i + 1 + i % 2], indices[i + 2 - i % 2]])
+                    .collect(),
+                _ => (0..indices.len().saturating_sub(2))
+                    .map(|i| [indices[i + 1], indices[i + 2], indices[0]])
+                    .collect(),
+            };
+            let material = prim.material();
+            let info = material.index().and_then(|i| materials.get(i));
+            let uv_of = |set: u32| -> Result<Option<Vec<[f64; 2]>>> {
+                match prim.get(&gltf::Semantic::TexCoords(set)) {
+                    None => Ok(None),
+                    Some(acc) => {
+                        let uv = read_accessor::<2>(
+                            path,
+                            &acc,
+                            &buffers,
+                            &format!("{jp}.attributes.TEXCOORD_{set}"),
+                        )?;
+                        if uv.len() != nverts {
+                            return Err(scene_err(path, format!("{jp}.attributes.TEXCOORD_{set}: {} values for {nverts} vertices", uv.len())));
+                        }
+                        Ok(Some(uv))
+                    }
+                }
+            };
+            let colors: Option<Vec<[f64; 3]>> = match prim.get(&gltf::Semantic::Colors(0)) {
+                None => None,
+                Some(acc) => {
+                    let c = read_accessor::<3>(
+                        path,
+                        &acc,
+                        &buffers,
+                        &format!("{jp}.attributes.COLOR_0"),
+                    )?;
+                    if c.len() != nverts {
+                        return Err(scene_err(
+                            path,
+                            format!(
+                                "{jp}.attributes.COLOR_0: {} values for {nverts} vertices",
+                                c.len()
+                            ),
+                        ));
+                    }
+                    Some(
+                        c.into_iter()
+                            .map(|c| c.map(|x| if x.is_finite() { x.max(0.0) } else { 0.0 }))
+                            .collect(),
+                    )
+                }
+            };
+            let base_uv = match info.and_then(|m| m.base_texture) {
+                Some((_, set, _)) => uv_of(set)?,
+                None => None,
+            };
+            let emissive_uv = match info.and_then(|m| m.emissive_texture) {
+                Some((_, set, _)) => uv_of(set)?,
+                None => None,
+            };
+            if info.is_some_and(|m| m.base_texture.is_some()) && base_uv.is_none() {
+                warn(&mut warnings, WarningKind::Texture, format!("{jp}: material '{}' has a base colour texture but the primitive no texture coordinates; factor used", info.map_or("", |m| m.name.as_str())));
+            }
+            let base_index = scene.positions.len() as u32;
+            for p in &local {
+                scene
+                    .positions
+                    .push(world.transform_point3(DVec3::from_array(*p)));
+            }
+            let material_id = material.index().map(|i| i as u32);
+            for t in &tris {
+                let t = if mirrored { [t[0], t[2], t[1]] } else { *t };
+                scene.triangles.push(t.map(|i| base_index + i as u32));
+                scene.material.push(material_id);
+                let mut albedo = match info {
+                    Some(m) => m.base,
+                    None => [options.default_albedo; 3],
+                };
+                let mut emission = info.map_or([0.0; 3], |m| m.emission);
+                if let (Some(m), Some(uv)) = (info, &base_uv) {
+                    if let Some((img, _, s)) = m.base_texture {
+                        let mean = images[&img].mean_over(t.map(|i| uv[i]), &s);
+                        for c in 0..3 {
+                            albedo[c] *= mean[c];
+                        }
+                    }
+                }
+                if let (Some(m), Some(uv)) = (info, &emissive_uv) {
+                    if let Some((img, _, s)) = m.emissive_texture {
+                        let mean = images[&img].mean_over(t.map(|i| uv[i]), &s);
+                        for c in 0..3 {
+                            emission[c] *= mean[c];
+                        }
+                    }
+                }
+                if let Some(col) = &colors {
+                    for c in 0..3 {
+                        albedo[c] *= (col[t[0]][c] + col[t[1]][c] + col[t[2]][c]) / 3.0;
+                    }
+                }
+                if albedo.iter().any(|&a| a >= ALBEDO_MAX) {
+                    let name = info.map_or("(no material)".to_string(), |m| m.name.clone());
+                    *clamped.entry(name).or_default() += 1;
+                    albedo = albedo.map(|a| a.min(ALBEDO_MAX));
+                }
+                scene.albedo.push(albedo);
+                scene.emission.push(emission);
+            }
+        }
+    }
+    let mut modes: Vec<String> = skipped_modes.into_iter().collect();
+    modes.sort();
+    for m in modes {
+        warn(
+            &mut warnings,
+            WarningKind::Unsupported,
+            format!("{m}: not triangles, skipped"),
+        );
+    }
+    let mut clamped: Vec<(String, usize)> = clamped.into_iter().collect();
+    clamped.sort();
+    for (name, n) in clamped {
+        warn(&mut warnings, WarningKind::Albedo, format!("material '{name}': albedo at or above {ALBEDO_MAX} on {n} triangles lowered to {ALBEDO_MAX} (the model needs albedo below 1)"));
+    }
+    if let Some(y) = options.emit_above {
+        for t in 0..scene.len() {
+            if scene.corners(t).iter().all(|p| p.y > y) {
+                scene.emission[t] = [options.emission; 3];
+            }
+        }
+    }
+    finish(path, scene, warnings)
+}
+
+/// The checks every loader ends with: some triangle, some non-degenerate triangle; warnings
+/// for repeated triangles and for a scene without any light.
+pub(crate) fn finish(path: &Path, mut scene: Scene, mut warnings: Vec<Warning>) -> Result<Scene> {
+    if scene.is_empty() {
+        return Err(scene_err(
+            path,
+            "no triangles (the default scene instances no triangle primitives)",
+        ));
+    }
+    if scene.degenerate_count() == scene.len() {
+        return Err(scene_err(
+            path,
+            format!(
+                "no non-degenerate triangle among {} (all have zero area)",
+                scene.len()
+            ),
+        ));
+    }
+    let duplicates = scene.duplicates();
+    let count = duplicates.iter().filter(|d| d.is_some()).count();
+    if count > 0 {
+        warnings.push(Warning::in_file(WarningKind::Duplicate, path, None, format!(
+            "{count} triangles repeat an earlier one (same corners, same orientation); each is solved once and reported with its first copy's radiance"
+        )));
+    }
+    if scene.emitter_count() == 0 && scene.lights.is_empty() {
+        warnings.push(Warning::in_file(
+            WarningKind::NoEmitter,
+            path,
+            None,
+            "no emitting triangle and no light; the answer is all zero",
+        ));
+    }
+    scene.warnings.extend(warnings);
+    Ok(scene)
+}
