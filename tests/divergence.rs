@@ -223,9 +223,17 @@ fn bound_of(scene: &Scene) -> f64 {
 /// consistent with the radiance) or a failure the caller cannot take for convergence. Prints
 /// the figures; returns true when the solve failed.
 fn check(what: &str, scene: &Scene, options: &SolverOptions, solver: Solver) -> bool {
+    check_solution(what, scene, &solve_with(scene, options, solver), solver)
+}
+
+/// Solves `scene` with `solver`.
+fn solve_with(scene: &Scene, options: &SolverOptions, solver: Solver) -> Solution {
     let patches = build_patches(scene, None);
-    let solution =
-        (solver.1)(&patches, options, &Progress::hidden()).expect("fits the memory limit");
+    (solver.1)(&patches, options, &Progress::hidden()).expect("fits the memory limit")
+}
+
+/// The checks of [`check`] on a solution of `scene` by `solver`.
+fn check_solution(what: &str, scene: &Scene, solution: &Solution, solver: Solver) -> bool {
     let st = &solution.stats;
     let bound = bound_of(scene);
     println!(
@@ -408,10 +416,13 @@ fn back_to_back_twins_of_venetian_blinds() {
 #[test]
 fn dense_blinds_recover_by_damping() {
     let scene = blinds_room(30).scene();
-    let patches = build_patches(&scene, None);
-    let solution = solve_dense(&patches, &front_only(), &Progress::hidden()).expect("fits");
+    let dense = SOLVERS[1];
+    let solution = solve_with(&scene, &front_only(), dense);
+    assert!(
+        !check_solution("blinds, damped", &scene, &solution, dense),
+        "the damped dense solve must not fail"
+    );
     let st = &solution.stats;
-    assert!(st.failure.is_none(), "{:?}", st.failure);
     assert!(
         st.converged,
         "{} sweeps, residual {}",
@@ -422,16 +433,6 @@ fn dense_blinds_recover_by_damping() {
         damped < st.iterations,
         "damped after {damped} of {}",
         st.iterations
-    );
-    let bound = bound_of(&scene);
-    let largest = solution
-        .triangle_radiance
-        .iter()
-        .flat_map(|b| b.iter().copied())
-        .fold(0.0f64, |m, x| m.max(x.abs()));
-    assert!(
-        largest <= bound * (1.0 + health::BOUND_SLACK),
-        "{largest} > {bound}"
     );
     assert!(
         st.negative_fraction < health::NEGATIVE_WARNING,

@@ -153,6 +153,20 @@ pub fn start_damping(
     true
 }
 
+/// Damps the state a sweep just wrote (`radiance`, `anti`, against the state it read,
+/// `previous_radiance`, `previous_anti`) once the solve is damped ([`start_damping`],
+/// [`crate::solve::health::damp`]); leaves it as it is before. The same in both solvers.
+pub fn damp_if_damped<const N: usize>(
+    guard: &Guard,
+    (radiance, previous_radiance): (&mut [[f64; N]], &[[f64; N]]),
+    (anti, previous_anti): (&mut [[f32; N]], &[[f32; N]]),
+) {
+    if guard.damped() {
+        crate::solve::health::damp(radiance, previous_radiance);
+        crate::solve::health::damp(anti, previous_anti);
+    }
+}
+
 /// The end of sweep `iteration` (1-based), the same in both solvers: counts it, shows its
 /// `change` on the progress bar, asks the health `guard` (`num` the change's numerator,
 /// `largest` the largest |B|, `finite` whether every value is finite) and then `convergence`

@@ -15,7 +15,7 @@ use crate::geometry::bins::Bins;
 use crate::mesh::Patches;
 use crate::progress::Progress;
 use crate::solve::budget::{self, Budget, MemoryStats};
-use crate::solve::convergence::{end_sweep, start_damping};
+use crate::solve::convergence::{damp_if_damped, end_sweep, start_damping};
 use crate::solve::health::{self, Guard};
 use crate::solve::hierarchical::model;
 use crate::solve::solution::{Solution, SolveStats};
@@ -260,10 +260,11 @@ pub fn solve_dense(
             break;
         }
         start_damping(iteration, &mut guard, &mut convergence, &mut stats);
-        if guard.damped() {
-            crate::solve::health::damp(&mut radiance, &next_radiance);
-            crate::solve::health::damp(&mut anti, &next_anti);
-        }
+        damp_if_damped(
+            &guard,
+            (&mut radiance, &next_radiance),
+            (&mut anti, &next_anti),
+        );
     }
     stats.residual = convergence.residual;
     stats.elements = active.len();

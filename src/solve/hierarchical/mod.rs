@@ -37,7 +37,7 @@ use crate::solve::accelerate::Anderson;
 use crate::solve::budget::{
     self, Budget, HierarchicalCosts, LinkBudget, MemoryStats, ModelCounts, OverBudget,
 };
-use crate::solve::convergence::{end_sweep, start_damping};
+use crate::solve::convergence::{damp_if_damped, end_sweep, start_damping};
 use crate::solve::health::{self, Guard};
 pub use crate::solve::solution::HierarchyTimings;
 use crate::solve::solution::{Solution, SolveStats};
@@ -756,10 +756,11 @@ impl Prepared {
                     acc.restart();
                 }
             }
-            if guard.damped() {
-                health::damp(&mut radiance, &next_radiance);
-                health::damp(&mut anti, &next_anti);
-            }
+            damp_if_damped(
+                &guard,
+                (&mut radiance, &next_radiance),
+                (&mut anti, &next_anti),
+            );
             match anderson.as_mut() {
                 // Anderson: the next state mixes the last sweeps' outputs.
                 Some(acc) => {
