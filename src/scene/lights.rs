@@ -157,13 +157,8 @@ impl Light {
                 position,
                 intensity,
             } => {
-                let d = position - x;
-                let r2 = d.length_squared();
-                if !(r2 > 0.0 && r2.is_finite()) {
-                    return None;
-                }
-                let r = r2.sqrt();
-                Some((d / r, r, intensity.map(|i| i / r2)))
+                let (w, r, r2) = towards_point(x, position)?;
+                Some((w, r, intensity.map(|i| i / r2)))
             }
             Light::Spot {
                 position,
@@ -172,13 +167,7 @@ impl Light {
                 inner,
                 outer,
             } => {
-                let d = position - x;
-                let r2 = d.length_squared();
-                if !(r2 > 0.0 && r2.is_finite()) {
-                    return None;
-                }
-                let r = r2.sqrt();
-                let w = d / r;
+                let (w, r, r2) = towards_point(x, position)?;
                 let a = spot_falloff(-w.dot(direction.normalize()), inner, outer);
                 Some((w, r, intensity.map(|i| i * a / r2)))
             }
@@ -189,6 +178,18 @@ impl Light {
             Light::Sky { .. } => None,
         }
     }
+}
+
+/// The unit direction from `x` to `position`, the distance and its square; `None` when they
+/// coincide (or the distance is not finite).
+fn towards_point(x: DVec3, position: DVec3) -> Option<(DVec3, f64, f64)> {
+    let d = position - x;
+    let r2 = d.length_squared();
+    if !(r2 > 0.0 && r2.is_finite()) {
+        return None;
+    }
+    let r = r2.sqrt();
+    Some((d / r, r, r2))
 }
 
 /// The spot falloff at angle cosine `cos_angle` from the axis: 1 inside the inner cone, 0
