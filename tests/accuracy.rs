@@ -11,6 +11,18 @@ use antiradiance::solve::solution::error_against as error; // the design note's 
 use antiradiance::solve::SolverOptions;
 use glam::DVec3;
 
+/// The path tracer's answer for `patches` at `spp` samples per patch (default seed).
+fn path_traced(patches: &Patches, spp: usize) -> antiradiance::solve::solution::Solution {
+    solve_reference(
+        patches,
+        &ReferenceOptions {
+            spp,
+            ..ReferenceOptions::default()
+        },
+        &hidden(),
+    )
+}
+
 fn hidden() -> Progress {
     Progress::hidden()
 }
@@ -49,14 +61,7 @@ fn furnace_dense_and_hierarchical() {
 fn occluder_shadow_comes_from_antiradiance() {
     let scene = generated::occluder_scene();
     let patches: Patches = build_patches(&scene, None);
-    let truth = solve_reference(
-        &patches,
-        &ReferenceOptions {
-            spp: 1024,
-            ..ReferenceOptions::default()
-        },
-        &hidden(),
-    );
+    let truth = path_traced(&patches, 1024);
     let with = solve_dense(&patches, &SolverOptions::default(), &hidden()).unwrap();
     let without = solve_dense(
         &patches,
@@ -91,14 +96,7 @@ fn occluder_shadow_comes_from_antiradiance() {
 fn cornell_box_colour_bleeding_matches_reference() {
     let scene = generated::cornell_box();
     let patches = build_patches(&scene, None);
-    let truth = solve_reference(
-        &patches,
-        &ReferenceOptions {
-            spp: 512,
-            ..ReferenceOptions::default()
-        },
-        &hidden(),
-    );
+    let truth = path_traced(&patches, 512);
     let hier = solve_hierarchical(&patches, &SolverOptions::default(), &hidden()).unwrap();
     let err = error(&scene, &hier, &truth);
     eprintln!("cornell: hierarchical vs reference {err:.4}");
@@ -182,14 +180,7 @@ fn back_lit_plate_casts_a_shadow() {
         scene.triangles[t].swap(1, 2);
     }
     let patches = build_patches(&scene, None);
-    let truth = solve_reference(
-        &patches,
-        &ReferenceOptions {
-            spp: 1024,
-            ..ReferenceOptions::default()
-        },
-        &hidden(),
-    );
+    let truth = path_traced(&patches, 1024);
     let auto = solve_hierarchical(&patches, &SolverOptions::default(), &hidden()).unwrap();
     let front_only = solve_hierarchical(
         &patches,
