@@ -158,3 +158,30 @@ fn default_settings_agree_with_dense() {
         }
     }
 }
+
+/// The report's per-sweep work counts what a sweep evaluates: every cluster link into an
+/// element or an ancestor, once per element below its receiver, so at least one pair per
+/// cluster link; and as many pull terms as cluster links at least (a sender has one element or
+/// normal group or more).
+#[test]
+fn sweep_work_counts_every_element_below_each_receiver() {
+    let patches = build_patches(&generated::cornell_box(), Some(150.0));
+    let prepared = Prepared::new(&patches, &SolverOptions::default(), false).unwrap();
+    let (tree, links) = (&prepared.tree, &prepared.links);
+    let below: u64 = links
+        .cluster
+        .iter()
+        .map(|l| {
+            let (e0, e1) = tree.nodes[l.receiver as usize].elements;
+            (e1 - e0) as u64
+        })
+        .sum();
+    let (pairs, pull) = prepared.sweep_work();
+    assert_eq!(pairs, below);
+    assert!(pairs > links.cluster.len() as u64, "{pairs} pairs");
+    assert!(pull >= links.cluster.len() as u64, "{pull} pull terms");
+    let solution =
+        solve_hierarchical(&patches, &SolverOptions::default(), &Progress::hidden()).unwrap();
+    assert_eq!(solution.stats.element_link_pairs, pairs);
+    assert_eq!(solution.stats.pull_terms, pull);
+}

@@ -72,6 +72,13 @@ pub struct SolveStats {
     /// Elements solved: the hierarchical solver's leaf triangles after its on-demand splits,
     /// the dense solver's active patches; 0 for the path tracer.
     pub elements: usize,
+    /// Per sweep of the hierarchical solver: (element, cluster link) pairs its gather evaluates,
+    /// every cluster link into an element or one of its ancestors; 0 for the other solvers.
+    pub element_link_pairs: u64,
+    /// Per sweep of the hierarchical solver: the terms its pull sums, a cluster link's sender
+    /// elements (or normal groups, for a grouped sender) over every cluster link; 0 for the
+    /// other solvers.
+    pub pull_terms: u64,
     /// What the memory budget did (limit, estimate, what was coarsened, peak); `None` for the
     /// path tracer.
     pub memory: Option<crate::solve::budget::MemoryStats>,

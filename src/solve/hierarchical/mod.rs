@@ -402,6 +402,39 @@ impl Prepared {
         self.elem_area.len()
     }
 
+    /// Per sweep: (element, cluster link) pairs the gather evaluates and terms the pull sums
+    /// ([`SolveStats::element_link_pairs`], [`SolveStats::pull_terms`]).
+    pub fn sweep_work(&self) -> (u64, u64) {
+        let (tree, links) = (&self.tree, &self.links);
+        let node_links =
+            |i: u32| (links.cluster_start[i as usize + 1] - links.cluster_start[i as usize]) as u64;
+        let pairs = (0..self.element_count())
+            .into_par_iter()
+            .map(|e| {
+                let (mut total, mut node) = (0u64, tree.elements[e]);
+                while node != NONE {
+                    total += node_links(node);
+                    node = tree.nodes[node as usize].parent;
+                }
+                total
+            })
+            .sum();
+        let pull = links
+            .cluster
+            .par_iter()
+            .map(|l| {
+                if self.groups.is_grouped(l.sender) {
+                    let (g0, g1) = self.groups.range[l.sender as usize];
+                    (g1 - g0) as u64
+                } else {
+                    let (e0, e1) = tree.nodes[l.sender as usize].elements;
+                    (e1 - e0) as u64
+                }
+            })
+            .sum();
+        (pairs, pull)
+    }
+
     /// Bytes held by tree, links and per-sweep arrays (three channels).
     pub fn bytes(&self) -> u64 {
         self.static_bytes() + self.state_bytes(3)
@@ -799,6 +832,7 @@ impl Prepared {
             refinement: self.links.stats.clone(),
         });
         stats.elements = n;
+        (stats.element_link_pairs, stats.pull_terms) = self.sweep_work();
         memory.peak_bytes = crate::memory::peak_rss_bytes();
         stats.memory = Some(memory);
         // The result is checked against the bound of this solve's source (with exact direct
