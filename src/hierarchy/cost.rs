@@ -10,7 +10,7 @@ use crate::transport::{Entry, PatchGeom};
 
 /// Bytes of one [`crate::hierarchy::links::ClusterLink`] (checked where it is defined, so the
 /// estimate follows the type without this module depending on the links).
-pub const CLUSTER_LINK_BYTES: u64 = 40;
+pub const CLUSTER_LINK_BYTES: u64 = 12;
 
 /// Node pairs a task of the link traversal visits between two budget checks.
 pub const CHECK_EVERY: usize = 4096;
@@ -101,7 +101,7 @@ impl HierarchicalCosts {
         // start, RGB radiance of the result and of the returned state), groups and their
         // per-sweep sums, live-bin masks, radiance (two copies and the returned state) and
         // antiradiance slots (two copies and the returned state), link intensities, solution.
-        let links = c.cluster_links * link + c.nodes * 4 + exact + n * 4;
+        let links = c.cluster_links * link + c.nodes * (4 + 16) + exact + n * 4;
         let elements = n * (88 + 16 * ch + 24 + 8 * words + 4 + 48);
         let group = groups * (36 + 12 + 24 * (1 + nb) + 8 * ch * (1 + nb)) + n * 4;
         let state = slots * 4 * ch * 3 + n * 8 * ch * 2;
@@ -112,7 +112,7 @@ impl HierarchicalCosts {
             + group
             + c.nodes * words * 8
             + state
-            + c.cluster_links * 8 * ch
+            + c.cluster_links * 4 * ch
             + c.patches * SOLUTION_BYTES_PER_PATCH;
         refine.max(sweeps)
     }

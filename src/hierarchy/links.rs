@@ -73,25 +73,42 @@ pub const FLUX_SHARE: f64 = 1e-5;
 // The memory estimate of the links counts this size.
 const _: () = assert!(std::mem::size_of::<ClusterLink>() as u64 == budget::CLUSTER_LINK_BYTES);
 
-/// A cluster link: sender node S sends to receiver node R as one exchange along `w`.
+/// A cluster link: sender node S sends to receiver node R as one exchange along the direction
+/// from S's area-weighted centroid to R's ([`Links::point`] holds both, with S's spread).
 #[derive(Clone, Copy, Debug)]
 pub struct ClusterLink {
     /// Sender node.
     pub sender: u32,
     /// Receiver node.
     pub receiver: u32,
-    /// Unit direction of travel, sender centroid to receiver centroid.
-    pub w: [f32; 3],
-    /// The sender's area-weighted centroid: receivers measure their own direction and distance
-    /// from it.
-    pub origin: [f32; 3],
-    /// Direction bin of `w`.
+    /// Direction bin of travel (sender centroid to receiver centroid).
     pub bin: u16,
-    /// The sender's spread (see [`sender_spread`]): receivers
-    /// use the disk kernel `1 / (d^2 + spread)` instead of the point kernel `1 / d^2`, which
-    /// overestimates the exchange with a near, extended sender (form factors of a closed room
-    /// summing above 1).
+}
+
+/// What receivers read of a node when it sends along a cluster link, and where it sits when it
+/// receives: its area-weighted centroid (receivers measure their own direction and distance
+/// from it; a link's direction runs from the sender's to the receiver's) and its spread (see
+/// [`sender_spread`]): receivers use the disk kernel `1 / (d^2 + spread)` instead of the point
+/// kernel `1 / d^2`, which overestimates the exchange with a near, extended sender (form
+/// factors of a closed room summing above 1).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct NodePoint {
+    /// The node's area-weighted centroid.
+    pub centroid: [f32; 3],
+    /// The node's [`sender_spread`].
     pub spread: f32,
+}
+
+impl NodePoint {
+    /// The centroid in f64.
+    #[inline]
+    pub fn centroid(&self) -> glam::DVec3 {
+        glam::DVec3::new(
+            self.centroid[0] as f64,
+            self.centroid[1] as f64,
+            self.centroid[2] as f64,
+        )
+    }
 }
 
 /// The refined links, grouped by receiver.
@@ -101,6 +118,8 @@ pub struct Links {
     pub cluster: Vec<ClusterLink>,
     /// For each node, its incoming cluster links: `cluster[cluster_start[i]..cluster_start[i+1]]`.
     pub cluster_start: Vec<u32>,
+    /// For each node, its centroid and spread as cluster links read them.
+    pub point: Vec<NodePoint>,
     /// Exact element links: sender element per link, sorted by receiver element.
     pub exact_sender: Vec<u32>,
     /// Coupling entries of each exact link: `exact_entries[exact_entry_start[l]..[l+1]]`.
@@ -171,6 +190,7 @@ impl Links {
     pub fn bytes(&self) -> u64 {
         (self.cluster.len() * std::mem::size_of::<ClusterLink>()
             + self.cluster_start.len() * 4
+            + self.point.len() * std::mem::size_of::<NodePoint>()
             + self.exact_sender.len() * 8
             + self.exact_entries.len() * std::mem::size_of::<Entry>()
             + self.exact_start.len() * 4) as u64
@@ -481,11 +501,19 @@ fn cluster_link(tree: &ClusterTree, bins: &Bins, s: u32, r: u32) -> ClusterLink 
     ClusterLink {
         sender: s,
         receiver: r,
-        w: [w.x as f32, w.y as f32, w.z as f32],
-        origin: sn.centroid.as_vec3().to_array(),
-        spread: sender_spread(sn) as f32,
         bin: bins.bin_of(w) as u16,
     }
+}
+
+/// The [`NodePoint`] of every node of `tree`.
+fn node_points(tree: &ClusterTree) -> Vec<NodePoint> {
+    tree.nodes
+        .par_iter()
+        .map(|n| NodePoint {
+            centroid: n.centroid.as_vec3().to_array(),
+            spread: sender_spread(n) as f32,
+        })
+        .collect()
 }
 
 /// The gap between the bounding spheres of nodes `s` and `r` (negative when they overlap).
@@ -727,6 +755,7 @@ pub fn refine(
     let mut links = Links {
         cluster,
         cluster_start,
+        point: node_points(tree),
         exact_start: vec![0u32; n_elements + 1],
         ..Links::default()
     };

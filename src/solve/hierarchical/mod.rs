@@ -29,7 +29,7 @@ use rayon::prelude::*;
 use crate::error::Result;
 use crate::geometry::bins::Bins;
 use crate::geometry::tolerances::{SAME_NORMAL, UNIT_NORMAL_SLACK};
-use crate::hierarchy::links::{self, ClusterLink, LinkParams, Links};
+use crate::hierarchy::links::{self, ClusterLink, LinkParams, Links, NodePoint};
 use crate::hierarchy::{ClusterTree, NONE};
 use crate::mesh::Patches;
 use crate::progress::Progress;
@@ -450,7 +450,7 @@ impl Prepared {
             + n * (8 + 24 + 24 + 24 + 4)
             + self.live.bytes()
             + self.pairs.as_ref().map_or(0, PairCache::bytes)
-            + self.links.cluster.len() as u64 * 24
+            + self.links.cluster.len() as u64 * 12
             + self.groups.bytes(nb)
     }
 
@@ -529,6 +529,7 @@ impl Prepared {
     fn sweep_context(&self) -> SweepContext<'_> {
         SweepContext {
             tree: &self.tree,
+            points: &self.links.point,
             bins: &self.bins,
             live: &self.live,
             elem_area: &self.elem_area,
@@ -570,7 +571,7 @@ impl Prepared {
             .unwrap_or_else(|| (emission.clone(), vec![[0.0f32; C]; slots]));
         let mut next_radiance = radiance.clone();
         let mut next_anti = anti.clone();
-        let mut intensity = vec![[0.0f64; C]; self.links.cluster.len()];
+        let mut intensity = vec![[0.0f32; C]; self.links.cluster.len()];
         // Three channels and every bin of every element, against what this solve stores.
         let full_bytes = 2 * (n as u64 * 24 + (n * nb) as u64 * 12);
         let used_bytes = self.state_bytes(C as u64);
@@ -705,14 +706,14 @@ impl Prepared {
                                 a_acc,
                             );
                         }
-                        let mut add = |l: &ClusterLink, i: &[f64; C], k: PairFactor| {
+                        let mut add = |l: &ClusterLink, i: &[f32; C], k: PairFactor| {
                             for c in 0..C {
-                                h[c] += k.irradiance as f64 * i[c];
+                                h[c] += k.irradiance as f64 * i[c] as f64;
                             }
                             if k.anti != 0.0 {
                                 let bin = l.bin as usize;
                                 for c in 0..C {
-                                    a_acc[bin][c] += k.anti as f64 * i[c];
+                                    a_acc[bin][c] += k.anti as f64 * i[c] as f64;
                                 }
                             }
                         };
@@ -728,8 +729,8 @@ impl Prepared {
                                     {
                                         let [irradiance, anti] = f.map(f64::from);
                                         for c in 0..C {
-                                            h[c] += irradiance * i[c];
-                                            a_acc[bin as usize][c] += anti * i[c];
+                                            h[c] += irradiance * i[c] as f64;
+                                            a_acc[bin as usize][c] += anti * i[c] as f64;
                                         }
                                     }
                                 });

@@ -41,6 +41,8 @@ impl SweepSums {
 /// Everything a sweep reads that does not change between sweeps.
 pub(super) struct SweepContext<'a> {
     pub(super) tree: &'a ClusterTree,
+    /// Per node, its centroid and spread ([`Links::point`]).
+    pub(super) points: &'a [NodePoint],
     pub(super) bins: &'a Bins,
     pub(super) live: &'a LiveBins,
     pub(super) elem_area: &'a [f64],
@@ -87,14 +89,14 @@ impl SweepContext<'_> {
         x_e: DVec3,
         back: bool,
     ) -> PairFactor {
-        let origin = DVec3::new(l.origin[0] as f64, l.origin[1] as f64, l.origin[2] as f64);
-        let v = x_e - origin;
+        let sender = &self.points[l.sender as usize];
+        let v = x_e - sender.centroid();
         let d2 = v.length_squared();
         if !(d2 > 0.0) {
             return PairFactor::default();
         }
         let cos = -n_e.dot(v) / d2.sqrt();
-        let g = 1.0 / (d2 + l.spread as f64);
+        let g = 1.0 / (d2 + sender.spread as f64);
         let irradiance = if cos > 0.0 {
             cos * g * std::f64::consts::FRAC_1_PI
         } else {
@@ -122,8 +124,10 @@ impl SweepContext<'_> {
         group_a: &[[f64; C]],
         radiance: &[[f64; C]],
         anti: &[[f32; C]],
-    ) -> [f64; C] {
-        let w = DVec3::new(l.w[0] as f64, l.w[1] as f64, l.w[2] as f64);
+    ) -> [f32; C] {
+        let w = (self.points[l.receiver as usize].centroid()
+            - self.points[l.sender as usize].centroid())
+        .normalize_or_zero();
         let bin = l.bin as usize;
         let mut acc = [0.0f64; C];
         let mut add = |cos: f64, b: [f64; C], a: [f64; C], both: bool| {
@@ -165,7 +169,7 @@ impl SweepContext<'_> {
                 );
             }
         }
-        acc
+        acc.map(|x| x as f32)
     }
 }
 
