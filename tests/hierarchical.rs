@@ -185,3 +185,23 @@ fn sweep_work_counts_every_element_below_each_receiver() {
     assert_eq!(solution.stats.element_link_pairs, pairs);
     assert_eq!(solution.stats.pull_terms, pull);
 }
+
+/// The report says how the sweeps were accelerated, and why Anderson mixing was off when it
+/// was: on by default on a small scene, off (tail extrapolation) at depth 0.
+#[test]
+fn report_names_the_acceleration_used() {
+    let patches = build_patches(&generated::cornell_box(), None);
+    let on = solve_hierarchical(&patches, &SolverOptions::default(), &Progress::hidden()).unwrap();
+    assert_eq!(on.stats.acceleration, "anderson");
+    let options = SolverOptions {
+        acceleration_depth: 0,
+        ..SolverOptions::default()
+    };
+    let off = solve_hierarchical(&patches, &options, &Progress::hidden()).unwrap();
+    assert_eq!(
+        off.stats.acceleration,
+        "extrapolation (acceleration_depth 0)"
+    );
+    // Both reach the same fixed point.
+    assert!(error(&patches, &off, &on) < 0.01);
+}

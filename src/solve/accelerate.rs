@@ -5,7 +5,10 @@
 //! decaying modes at once, where the tail extrapolation of [`crate::solve::Convergence`] removes
 //! one.
 //!
-//! Vectors are flat `f64` slices with a weight per entry (the inner product is `sum w u v`).
+//! Vectors are flat `f64` slices with a weight per entry (the inner product is `sum w u v`). The
+//! history of differences is kept in f32: the differences are formed in f64 and only then
+//! rounded, so their relative precision (1e-7) is far below any solver tolerance, and the
+//! history takes half the memory.
 
 use std::collections::VecDeque;
 
@@ -15,9 +18,9 @@ pub struct Anderson {
     depth: usize,
     weight: Vec<f64>,
     /// Differences of residuals `f_k - f_(k-1)`, newest last.
-    df: VecDeque<Vec<f64>>,
+    df: VecDeque<Vec<f32>>,
     /// Differences of sweep outputs `G_k - G_(k-1)`, newest last.
-    dg: VecDeque<Vec<f64>>,
+    dg: VecDeque<Vec<f32>>,
     /// The previous residual and sweep output.
     f_prev: Option<Vec<f64>>,
     g_prev: Vec<f64>,
@@ -39,7 +42,7 @@ impl Anderson {
 
     /// Bytes the history holds at its fullest.
     pub fn bytes(n: usize, depth: usize) -> u64 {
-        (n as u64) * 8 * (2 * depth as u64 + 3)
+        (n as u64) * (4 * 2 * depth as u64 + 8 * 3)
     }
 
     /// Forgets the history (the next step is a plain sweep).
@@ -64,8 +67,12 @@ impl Anderson {
         }
         let f: Vec<f64> = g.iter().zip(x.iter()).map(|(g, x)| g - x).collect();
         if let Some(f_prev) = self.f_prev.take() {
-            let df: Vec<f64> = f.iter().zip(&f_prev).map(|(a, b)| a - b).collect();
-            let dg: Vec<f64> = g.iter().zip(&self.g_prev).map(|(a, b)| a - b).collect();
+            let df: Vec<f32> = f.iter().zip(&f_prev).map(|(a, b)| (a - b) as f32).collect();
+            let dg: Vec<f32> = g
+                .iter()
+                .zip(&self.g_prev)
+                .map(|(a, b)| (a - b) as f32)
+                .collect();
             if self.df.len() == self.depth {
                 self.df.pop_front();
                 self.dg.pop_front();
@@ -83,11 +90,18 @@ impl Anderson {
         }
         // Normal equations of min |f - dF gamma|_w, with a little Tikhonov regularization.
         let w = &self.weight;
-        let dot = |u: &[f64], v: &[f64]| -> f64 {
+        let dot = |u: &[f32], v: &[f32]| -> f64 {
             u.iter()
                 .zip(v)
                 .zip(w)
-                .map(|((a, b), w)| w * a * b)
+                .map(|((&a, &b), w)| w * a as f64 * b as f64)
+                .sum::<f64>()
+        };
+        let dot_f = |u: &[f32], v: &[f64]| -> f64 {
+            u.iter()
+                .zip(v)
+                .zip(w)
+                .map(|((&a, b), w)| w * a as f64 * b)
                 .sum::<f64>()
         };
         let mut a = vec![0.0f64; m * m];
@@ -98,7 +112,7 @@ impl Anderson {
                 a[i * m + j] = v;
                 a[j * m + i] = v;
             }
-            rhs[i] = dot(&self.df[i], &f);
+            rhs[i] = dot_f(&self.df[i], &f);
         }
         let trace: f64 = (0..m).map(|i| a[i * m + i]).sum();
         if !(trace > 0.0 && trace.is_finite()) {
@@ -117,8 +131,8 @@ impl Anderson {
             return;
         }
         for (k, gk) in gamma.iter().enumerate() {
-            for (xi, d) in x.iter_mut().zip(&self.dg[k]) {
-                *xi -= gk * d;
+            for (xi, &d) in x.iter_mut().zip(&self.dg[k]) {
+                *xi -= gk * d as f64;
             }
         }
     }

@@ -79,6 +79,13 @@ pub struct SolveStats {
     /// elements (or normal groups, for a grouped sender) over every cluster link; 0 for the
     /// other solvers.
     pub pull_terms: u64,
+    /// How the hierarchical solver sped up its sweeps: `"anderson"` (Anderson mixing), or
+    /// `"extrapolation"` (the geometric tail jump of [`crate::solve::Convergence`]) followed by
+    /// why Anderson was off (`acceleration_depth 0`, its history over its own budget, or over
+    /// what the memory limit leaves); empty for the other solvers. Either reaches the same
+    /// fixed point.
+    #[serde(skip_serializing_if = "String::is_empty")]
+    pub acceleration: String,
     /// What the memory budget did (limit, estimate, what was coarsened, peak); `None` for the
     /// path tracer.
     pub memory: Option<crate::solve::budget::MemoryStats>,

@@ -618,15 +618,29 @@ impl Prepared {
         let depth = options.acceleration_depth;
         let history = Anderson::bytes(state_len, depth) + 16 * state_len as u64;
         let mut memory = self.memory.clone();
-        let accelerate = depth > 0 && history <= ACCELERATION_BUDGET_BYTES;
-        let accelerate = if accelerate && history > self.budget.spare(memory.estimate_bytes) {
+        let mb = |bytes: u64| bytes.div_ceil(1 << 20);
+        let off = if depth == 0 {
+            Some("acceleration_depth 0".to_string())
+        } else if history > ACCELERATION_BUDGET_BYTES {
+            Some(format!(
+                "Anderson history of {} MB over its {} MB budget",
+                mb(history),
+                mb(ACCELERATION_BUDGET_BYTES)
+            ))
+        } else if history > self.budget.spare(memory.estimate_bytes) {
             memory.coarsened.push("Anderson acceleration off".into());
-            false
+            Some(format!(
+                "Anderson history of {} MB over what the memory limit leaves",
+                mb(history)
+            ))
         } else {
-            if accelerate {
-                memory.estimate_bytes += history;
-            }
-            accelerate
+            memory.estimate_bytes += history;
+            None
+        };
+        let accelerate = off.is_none();
+        stats.acceleration = match off {
+            None => "anderson".into(),
+            Some(why) => format!("extrapolation ({why})"),
         };
         let mut anderson = accelerate.then(|| {
             let mut weight = Vec::with_capacity(state_len);
