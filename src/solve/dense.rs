@@ -17,7 +17,7 @@ use crate::progress::Progress;
 use crate::solve::budget::{self, Budget, MemoryStats};
 use crate::solve::convergence::{damp_if_damped, end_sweep, start_damping};
 use crate::solve::health::{self, Guard};
-use crate::solve::hierarchical::model;
+use crate::solve::model;
 use crate::solve::solution::{Solution, SolveStats};
 use crate::solve::{
     change_ratio, change_sums, finish, source_and_albedo_max, Convergence, SolverOptions,
@@ -50,7 +50,7 @@ pub fn solve_dense(
     let nb = bins.len();
     let n = patches.len();
     let params = options.coupling();
-    let back = crate::solve::hierarchical::model::back_blocking(patches, options);
+    let back = crate::solve::model::back_blocking(patches, options);
     let budget = Budget::start(options.memory_limit());
     let estimate = budget::dense_bytes(n as u64, options.bins, options.near_quadrature);
     let refuse = |bytes: u64| {
