@@ -2,7 +2,7 @@
 
 use serde::Serialize;
 
-pub use crate::geometry::sanitize;
+pub use crate::files::sanitize;
 use crate::mesh::Patches;
 use crate::solve::health::{self, FailureKind, SolveFailure};
 
