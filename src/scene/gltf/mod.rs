@@ -119,6 +119,57 @@ fn sampling_of(sampler: &gltf::texture::Sampler) -> Sampling {
 /// OBJ scenes.
 pub fn load_gltf(path: &Path, options: &SceneOptions) -> Result<Scene> {
     options.validate()?;
+    let (document, blob) = parse(path)?;
+    let base = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+    let mut warnings: Vec<Warning> = Vec::new();
+    let buffers = read_buffers(path, &base, &document, blob)?;
+    for ext in document.extensions_used() {
+        if ext == "KHR_texture_transform" {
+            warn(&mut warnings, path, WarningKind::Unsupported, "KHR_texture_transform is used but not applied: textures are averaged with untransformed UVs".into());
+        }
+    }
+    let (materials, images) = read_materials(path, &base, &document, &buffers, &mut warnings)?;
+    let Some(gscene) = document
+        .default_scene()
+        .or_else(|| document.scenes().next())
+    else {
+        return Err(scene_err(path, "no scene (the file defines no scenes)"));
+    };
+    let mut loader = Loader {
+        path,
+        options,
+        buffers: &buffers,
+        materials: &materials,
+        images: &images,
+        scene: Scene {
+            path: path.to_path_buf(),
+            material_names: materials.iter().map(|m| m.name.clone()).collect(),
+            ..Scene::default()
+        },
+        warnings,
+        clamped: HashMap::new(),
+        skipped_modes: HashSet::new(),
+    };
+    loader.add_nodes(gscene)?;
+    let (mut scene, warnings) = loader.finish_warnings();
+    if let Some(y) = options.emit_above {
+        for t in 0..scene.len() {
+            if scene.corners(t).iter().all(|p| p.y > y) {
+                scene.emission[t] = [options.emission; 3];
+            }
+        }
+    }
+    finish(path, scene, warnings)
+}
+
+/// Adds a warning about the file `path`.
+fn warn(warnings: &mut Vec<Warning>, path: &Path, kind: WarningKind, message: String) {
+    warnings.push(Warning::in_file(kind, path, None, message))
+}
+
+/// Reads the file, checks a GLB's headers or that it is a JSON object, parses and validates
+/// it: the document and the GLB binary chunk, if any.
+fn parse(path: &Path) -> Result<(gltf::Document, Option<Vec<u8>>)> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     if bytes.starts_with(b"glTF") {
         check_glb(path, &bytes)?;
@@ -134,7 +185,20 @@ pub fn load_gltf(path: &Path, options: &SceneOptions) -> Result<Scene> {
             "not glTF: neither the GLB magic 'glTF' at byte 0 nor a JSON object",
         ));
     }
-    let gltf_error = |e: gltf::Error| match e {
+    // Parsed first, validated after our own check of the POSITION references (gltf-json 1.4.1's
+    // validation indexes the accessors with them unchecked, and panics on a bad one).
+    let raw = gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| gltf_error(path, e))?;
+    check_attribute_accessors(path, raw.document.as_json())?;
+    let blob = raw.blob;
+    let document =
+        gltf::Document::from_json(raw.document.into_json()).map_err(|e| gltf_error(path, e))?;
+    Ok((document, blob))
+}
+
+/// The one-line error of a file the `gltf` crate rejects: the first validation problem with its
+/// JSON path, or the JSON syntax error with its line and column.
+fn gltf_error(path: &Path, e: gltf::Error) -> Error {
+    match e {
         gltf::Error::Validation(list) => {
             let (p, err) = &list[0];
             let more = if list.len() > 1 {
@@ -159,43 +223,41 @@ pub fn load_gltf(path: &Path, options: &SceneOptions) -> Result<Scene> {
             ),
         ),
         other => scene_err(path, format!("invalid glTF: {other}")),
-    };
-    // Parsed first, validated after our own check of the POSITION references (gltf-json 1.4.1's
-    // validation indexes the accessors with them unchecked, and panics on a bad one).
-    let raw = gltf::Gltf::from_slice_without_validation(&bytes).map_err(gltf_error)?;
-    {
-        let root = raw.document.as_json();
-        for (m, mesh) in root.meshes.iter().enumerate() {
-            for (k, prim) in mesh.primitives.iter().enumerate() {
-                for (semantic, index) in &prim.attributes {
-                    if index.value() >= root.accessors.len() {
-                        let name = match semantic {
-                            gltf::json::validation::Checked::Valid(s) => s.to_string(),
-                            gltf::json::validation::Checked::Invalid => "?".to_string(),
-                        };
-                        return Err(scene_err(
-                            path,
-                            format!(
-                                "invalid glTF at meshes[{m}].primitives[{k}].attributes.{name}: accessor {} does not exist ({} accessors)",
-                                index.value(),
-                                root.accessors.len()
-                            ),
-                        ));
-                    }
+    }
+}
+
+/// Every primitive attribute names an accessor that exists.
+fn check_attribute_accessors(path: &Path, root: &gltf::json::Root) -> Result<()> {
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (k, prim) in mesh.primitives.iter().enumerate() {
+            for (semantic, index) in &prim.attributes {
+                if index.value() >= root.accessors.len() {
+                    let name = match semantic {
+                        gltf::json::validation::Checked::Valid(s) => s.to_string(),
+                        gltf::json::validation::Checked::Invalid => "?".to_string(),
+                    };
+                    return Err(scene_err(
+                        path,
+                        format!(
+                            "invalid glTF at meshes[{m}].primitives[{k}].attributes.{name}: accessor {} does not exist ({} accessors)",
+                            index.value(),
+                            root.accessors.len()
+                        ),
+                    ));
                 }
             }
         }
     }
-    let blob = raw.blob;
-    let document = gltf::Document::from_json(raw.document.into_json()).map_err(gltf_error)?;
-    let base = path.parent().unwrap_or(Path::new(".")).to_path_buf();
-    let doc = &document;
-    let mut warnings: Vec<Warning> = Vec::new();
-    let warn = |w: &mut Vec<Warning>, kind: WarningKind, m: String| {
-        w.push(Warning::in_file(kind, path, None, m))
-    };
+    Ok(())
+}
 
-    // Buffers.
+/// Every buffer's bytes (the GLB binary chunk or a URI), at least as long as it says.
+fn read_buffers(
+    path: &Path,
+    base: &Path,
+    doc: &gltf::Document,
+    blob: Option<Vec<u8>>,
+) -> Result<Vec<Vec<u8>>> {
     let mut buffers: Vec<Vec<u8>> = Vec::new();
     for buffer in doc.buffers() {
         let what = format!("buffers[{}]", buffer.index());
@@ -206,7 +268,7 @@ pub fn load_gltf(path: &Path, options: &SceneOptions) -> Result<Scene> {
                     format!("{what}: refers to the GLB binary chunk, which is missing"),
                 )
             })?,
-            gltf::buffer::Source::Uri(uri) => read_uri(path, &base, uri, &what)?,
+            gltf::buffer::Source::Uri(uri) => read_uri(path, base, uri, &what)?,
         };
         if data.len() < buffer.length() {
             return Err(scene_err(
@@ -220,57 +282,23 @@ pub fn load_gltf(path: &Path, options: &SceneOptions) -> Result<Scene> {
         }
         buffers.push(data);
     }
+    Ok(buffers)
+}
 
-    for ext in doc.extensions_used() {
-        if ext == "KHR_texture_transform" {
-            warn(&mut warnings, WarningKind::Unsupported, "KHR_texture_transform is used but not applied: textures are averaged with untransformed UVs".into());
-        }
-    }
-
-    // Materials, and the images they use (decoded once).
-    let mut images: HashMap<usize, Texture> = HashMap::new();
-    let mut load_image = |image: gltf::Image, what: &str| -> Result<usize> {
-        let index = image.index();
-        if images.contains_key(&index) {
-            return Ok(index);
-        }
-        let what = format!("{what} (images[{index}])");
-        // Read from the JSON: gltf 1.4.1's `Image::source` panics on an image with a buffer
-        // view but no MIME type, or with neither a URI nor a buffer view.
-        let json = &doc.as_json().images[index];
-        let (bytes, name) = if let Some(v) = json.buffer_view {
-            let view = doc
-                .views()
-                .nth(v.value())
-                .ok_or_else(|| scene_err(path, format!("{what}: missing buffer view")))?;
-            let buffer = buffers
-                .get(view.buffer().index())
-                .ok_or_else(|| scene_err(path, format!("{what}: missing buffer")))?;
-            let end = view.offset().checked_add(view.length());
-            let data = end
-                .and_then(|end| buffer.get(view.offset()..end))
-                .ok_or_else(|| {
-                    scene_err(
-                        path,
-                        format!(
-                            "{what}: bufferViews[{}] lies outside its buffer",
-                            view.index()
-                        ),
-                    )
-                })?;
-            (data.to_vec(), String::new())
-        } else if let Some(uri) = &json.uri {
-            (read_uri(path, &base, uri, &what)?, uri.clone())
-        } else {
-            return Err(scene_err(
-                path,
-                format!("{what}: neither a uri nor a bufferView"),
-            ));
-        };
-        let texture = Texture::decode(&bytes, &name, true)
-            .map_err(|e| scene_err(path, format!("{what}: {e}")))?;
-        images.insert(index, texture);
-        Ok(index)
+/// Every material in file order, and the images they use (decoded once, by image index).
+fn read_materials(
+    path: &Path,
+    base: &Path,
+    doc: &gltf::Document,
+    buffers: &[Vec<u8>],
+    warnings: &mut Vec<Warning>,
+) -> Result<(Vec<MaterialInfo>, HashMap<usize, Texture>)> {
+    let mut images = Images {
+        path,
+        base,
+        doc,
+        buffers,
+        decoded: HashMap::new(),
     };
     let mut materials: Vec<MaterialInfo> = Vec::new();
     for m in doc.materials() {
@@ -282,27 +310,18 @@ pub fn load_gltf(path: &Path, options: &SceneOptions) -> Result<Scene> {
         let pbr = m.pbr_metallic_roughness();
         let bf = pbr.base_color_factor();
         let base_texture = match pbr.base_color_texture() {
-            Some(info) => Some((
-                load_image(
-                    info.texture().source(),
-                    &format!("materials[{i}].pbrMetallicRoughness.baseColorTexture"),
-                )?,
-                info.tex_coord(),
-                sampling_of(&info.texture().sampler()),
-            )),
+            Some(info) => Some(images.texture_ref(
+                &info,
+                &format!("materials[{i}].pbrMetallicRoughness.baseColorTexture"),
+            )?),
             None => None,
         };
         let strength = m.emissive_strength().map(f64::from).unwrap_or(1.0);
         let ef = m.emissive_factor();
         let emissive_texture = match m.emissive_texture() {
-            Some(info) => Some((
-                load_image(
-                    info.texture().source(),
-                    &format!("materials[{i}].emissiveTexture"),
-                )?,
-                info.tex_coord(),
-                sampling_of(&info.texture().sampler()),
-            )),
+            Some(info) => {
+                Some(images.texture_ref(&info, &format!("materials[{i}].emissiveTexture"))?)
+            }
             None => None,
         };
         let emission = ef.map(|e| f64::from(e) * strength / LUMENS_PER_WATT);
@@ -319,7 +338,8 @@ pub fn load_gltf(path: &Path, options: &SceneOptions) -> Result<Scene> {
         }
         if m.double_sided() {
             warn(
-                &mut warnings,
+                warnings,
+                path,
                 WarningKind::Unsupported,
                 format!("material '{name}' is doubleSided: solved one-sided (front = counter-clockwise), its back absorbs"),
             );
@@ -332,284 +352,454 @@ pub fn load_gltf(path: &Path, options: &SceneOptions) -> Result<Scene> {
             emissive_texture,
         });
     }
-    drop(load_image);
+    Ok((materials, images.decoded))
+}
 
-    let Some(gscene) = doc.default_scene().or_else(|| doc.scenes().next()) else {
-        return Err(scene_err(path, "no scene (the file defines no scenes)"));
-    };
+/// The images of a file, decoded the first time a material uses them.
+struct Images<'a> {
+    path: &'a Path,
+    base: &'a Path,
+    doc: &'a gltf::Document,
+    buffers: &'a [Vec<u8>],
+    decoded: HashMap<usize, Texture>,
+}
 
-    let mut scene = Scene {
-        path: path.to_path_buf(),
-        material_names: materials.iter().map(|m| m.name.clone()).collect(),
-        ..Scene::default()
-    };
-    let mut clamped: HashMap<String, usize> = HashMap::new();
-    let mut skipped_modes: HashSet<String> = HashSet::new();
-    let mut visited: HashSet<usize> = HashSet::new();
-    // Depth-first, children in order: a stack of (node, parent's world matrix), reversed.
-    let mut stack: Vec<(gltf::Node, DMat4)> =
-        gscene.nodes().map(|n| (n, DMat4::IDENTITY)).collect();
-    stack.reverse();
-    while let Some((node, parent)) = stack.pop() {
-        if !visited.insert(node.index()) {
-            return Err(scene_err(
-                path,
-                format!("nodes[{}] is reached twice (a node may have one parent; the hierarchy has a cycle or a shared child)", node.index()),
-            ));
+impl Images<'_> {
+    /// A material's texture: its image (decoded), texture coordinate set and sampling.
+    fn texture_ref(
+        &mut self,
+        info: &gltf::texture::Info,
+        what: &str,
+    ) -> Result<(usize, u32, Sampling)> {
+        Ok((
+            self.load(info.texture().source(), what)?,
+            info.tex_coord(),
+            sampling_of(&info.texture().sampler()),
+        ))
+    }
+
+    /// Decodes `image` unless it was already: its index.
+    fn load(&mut self, image: gltf::Image, what: &str) -> Result<usize> {
+        let path = self.path;
+        let index = image.index();
+        if self.decoded.contains_key(&index) {
+            return Ok(index);
         }
-        let world = parent * local_matrix(&node);
-        if !world.is_finite() {
-            return Err(scene_err(
-                path,
-                format!("nodes[{}]: transform is not finite", node.index()),
-            ));
-        }
-        for child in node.children().collect::<Vec<_>>().into_iter().rev() {
-            stack.push((child, world));
-        }
-        if let Some(light) = node.light() {
-            let li = light.index();
-            let color = light.color().map(f64::from);
-            let intensity = f64::from(light.intensity());
-            let rgb = color.map(|c| c * intensity / LUMENS_PER_WATT);
-            let position = world.transform_point3(DVec3::ZERO);
-            let axis = world.transform_vector3(DVec3::NEG_Z);
-            let l = match light.kind() {
-                gltf::khr_lights_punctual::Kind::Point => Light::Point {
-                    position,
-                    intensity: rgb,
-                },
-                gltf::khr_lights_punctual::Kind::Spot {
-                    inner_cone_angle,
-                    outer_cone_angle,
-                } => Light::Spot {
-                    position,
-                    direction: axis.normalize_or_zero(),
-                    intensity: rgb,
-                    inner: f64::from(inner_cone_angle),
-                    outer: f64::from(outer_cone_angle),
-                },
-                gltf::khr_lights_punctual::Kind::Directional => Light::Sun {
-                    direction: axis.normalize_or_zero(),
-                    irradiance: rgb,
-                },
-            };
-            l.validate(&format!(
-                "{}: KHR_lights_punctual.lights[{li}] (nodes[{}])",
-                path.display(),
-                node.index()
-            ))
-            .map_err(|e| {
-                scene_err(
-                    path,
-                    e.to_string()
-                        .trim_start_matches("invalid parameter: ")
-                        .to_string(),
-                )
-            })?;
-            if light.range().is_some() {
-                warn(&mut warnings, WarningKind::Unsupported, format!("KHR_lights_punctual.lights[{li}]: range is ignored (lights fall off as 1/r^2 everywhere)"));
-            }
-            scene.lights.push(l);
-        }
-        let Some(mesh) = node.mesh() else { continue };
-        let mirrored = world.determinant() < 0.0;
-        for prim in mesh.primitives() {
-            let jp = format!("meshes[{}].primitives[{}]", mesh.index(), prim.index());
-            let mode = prim.mode();
-            if !matches!(
-                mode,
-                Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
-            ) {
-                skipped_modes.insert(format!("{jp} ({mode:?})"));
-                continue;
-            }
-            let Some(pos_acc) = prim.get(&gltf::Semantic::Positions) else {
-                return Err(scene_err(path, format!("{jp}: no POSITION attribute")));
-            };
-            if pos_acc.data_type() != DataType::F32 || pos_acc.dimensions() != Dimensions::Vec3 {
-                return Err(scene_err(
-                    path,
-                    format!("{jp}.attributes.POSITION: must be VEC3 FLOAT"),
-                ));
-            }
-            let local = read_accessor::<3>(
-                path,
-                &pos_acc,
-                &buffers,
-                &format!("{jp}.attributes.POSITION"),
-            )?;
-            let nverts = local.len();
-            if let Some(v) = local.iter().position(|p| p.iter().any(|x| !x.is_finite())) {
-                return Err(scene_err(
-                    path,
-                    format!("{jp}.attributes.POSITION: vertex {v} is not finite"),
-                ));
-            }
-            let indices: Vec<usize> = match prim.indices() {
-                Some(acc) => {
-                    if !matches!(
-                        acc.data_type(),
-                        DataType::U8 | DataType::U16 | DataType::U32
-                    ) || acc.dimensions() != Dimensions::Scalar
-                    {
-                        return Err(scene_err(
-                            path,
-                            format!("{jp}.indices: must be unsigned integer scalars"),
-                        ));
-                    }
-                    let raw = read_accessor::<1>(path, &acc, &buffers, &format!("{jp}.indices"))?;
-                    let mut out = Vec::with_capacity(raw.len());
-                    for (k, r) in raw.iter().enumerate() {
-                        let i = r[0] as usize;
-                        if i >= nverts {
-                            return Err(scene_err(
-                                path,
-                                format!("{jp}.indices: index {i} at position {k} out of range ({nverts} vertices)"),
-                            ));
-                        }
-                        out.push(i);
-                    }
-                    out
-                }
-                None => (0..nverts).collect(),
-            };
-            let tris: Vec<[usize; 3]> = match mode {
-                Mode::Triangles => indices
-                    .chunks_exact(3)
-                    .map(|c| [c[0], c[1], c[2]])
-                    .collect(),
-                Mode::TriangleStrip => (0..indices.len().saturating_sub(2))
-                    .map(|i| [indices[i], indices[i + 1 + i % 2], indices[i + 2 - i % 2]])
-                    .collect(),
-                _ => (0..indices.len().saturating_sub(2))
-                    .map(|i| [indices[i + 1], indices[i + 2], indices[0]])
-                    .collect(),
-            };
-            let material = prim.material();
-            let info = material.index().and_then(|i| materials.get(i));
-            let uv_of = |set: u32| -> Result<Option<Vec<[f64; 2]>>> {
-                match prim.get(&gltf::Semantic::TexCoords(set)) {
-                    None => Ok(None),
-                    Some(acc) => {
-                        let uv = read_accessor::<2>(
-                            path,
-                            &acc,
-                            &buffers,
-                            &format!("{jp}.attributes.TEXCOORD_{set}"),
-                        )?;
-                        if uv.len() != nverts {
-                            return Err(scene_err(path, format!("{jp}.attributes.TEXCOORD_{set}: {} values for {nverts} vertices", uv.len())));
-                        }
-                        Ok(Some(uv))
-                    }
-                }
-            };
-            let colors: Option<Vec<[f64; 3]>> = match prim.get(&gltf::Semantic::Colors(0)) {
-                None => None,
-                Some(acc) => {
-                    let c = read_accessor::<3>(
+        let what = format!("{what} (images[{index}])");
+        // Read from the JSON: gltf 1.4.1's `Image::source` panics on an image with a buffer
+        // view but no MIME type, or with neither a URI nor a buffer view.
+        let json = &self.doc.as_json().images[index];
+        let (bytes, name) = if let Some(v) = json.buffer_view {
+            let view = self
+                .doc
+                .views()
+                .nth(v.value())
+                .ok_or_else(|| scene_err(path, format!("{what}: missing buffer view")))?;
+            let buffer = self
+                .buffers
+                .get(view.buffer().index())
+                .ok_or_else(|| scene_err(path, format!("{what}: missing buffer")))?;
+            let end = view.offset().checked_add(view.length());
+            let data = end
+                .and_then(|end| buffer.get(view.offset()..end))
+                .ok_or_else(|| {
+                    scene_err(
                         path,
-                        &acc,
-                        &buffers,
-                        &format!("{jp}.attributes.COLOR_0"),
-                    )?;
-                    if c.len() != nverts {
-                        return Err(scene_err(
-                            path,
-                            format!(
-                                "{jp}.attributes.COLOR_0: {} values for {nverts} vertices",
-                                c.len()
-                            ),
-                        ));
-                    }
-                    Some(
-                        c.into_iter()
-                            .map(|c| c.map(|x| if x.is_finite() { x.max(0.0) } else { 0.0 }))
-                            .collect(),
+                        format!(
+                            "{what}: bufferViews[{}] lies outside its buffer",
+                            view.index()
+                        ),
                     )
-                }
-            };
-            let base_uv = match info.and_then(|m| m.base_texture) {
-                Some((_, set, _)) => uv_of(set)?,
-                None => None,
-            };
-            let emissive_uv = match info.and_then(|m| m.emissive_texture) {
-                Some((_, set, _)) => uv_of(set)?,
-                None => None,
-            };
-            if info.is_some_and(|m| m.base_texture.is_some()) && base_uv.is_none() {
-                warn(&mut warnings, WarningKind::Texture, format!("{jp}: material '{}' has a base colour texture but the primitive no texture coordinates; factor used", info.map_or("", |m| m.name.as_str())));
+                })?;
+            (data.to_vec(), String::new())
+        } else if let Some(uri) = &json.uri {
+            (read_uri(path, self.base, uri, &what)?, uri.clone())
+        } else {
+            return Err(scene_err(
+                path,
+                format!("{what}: neither a uri nor a bufferView"),
+            ));
+        };
+        let texture = Texture::decode(&bytes, &name, true)
+            .map_err(|e| scene_err(path, format!("{what}: {e}")))?;
+        self.decoded.insert(index, texture);
+        Ok(index)
+    }
+}
+
+/// What the node traversal reads from and adds to.
+struct Loader<'a> {
+    path: &'a Path,
+    options: &'a SceneOptions,
+    buffers: &'a [Vec<u8>],
+    materials: &'a [MaterialInfo],
+    images: &'a HashMap<usize, Texture>,
+    scene: Scene,
+    warnings: Vec<Warning>,
+    /// Triangles whose albedo was lowered to [`ALBEDO_MAX`], by material name.
+    clamped: HashMap<String, usize>,
+    /// Primitives that are not triangles, by JSON path and mode.
+    skipped_modes: HashSet<String>,
+}
+
+impl Loader<'_> {
+    /// The nodes of `gscene` depth-first, children in order: their lights and primitives, in
+    /// world space.
+    fn add_nodes(&mut self, gscene: gltf::Scene) -> Result<()> {
+        let path = self.path;
+        let mut visited: HashSet<usize> = HashSet::new();
+        // A stack of (node, parent's world matrix), reversed.
+        let mut stack: Vec<(gltf::Node, DMat4)> =
+            gscene.nodes().map(|n| (n, DMat4::IDENTITY)).collect();
+        stack.reverse();
+        while let Some((node, parent)) = stack.pop() {
+            if !visited.insert(node.index()) {
+                return Err(scene_err(
+                    path,
+                    format!("nodes[{}] is reached twice (a node may have one parent; the hierarchy has a cycle or a shared child)", node.index()),
+                ));
             }
-            let base_index = scene.positions.len() as u32;
-            for p in &local {
-                scene
-                    .positions
-                    .push(world.transform_point3(DVec3::from_array(*p)));
+            let world = parent * local_matrix(&node);
+            if !world.is_finite() {
+                return Err(scene_err(
+                    path,
+                    format!("nodes[{}]: transform is not finite", node.index()),
+                ));
             }
-            let material_id = material.index().map(|i| i as u32);
-            for t in &tris {
-                let t = if mirrored { [t[0], t[2], t[1]] } else { *t };
-                scene.triangles.push(t.map(|i| base_index + i as u32));
-                scene.material.push(material_id);
-                let mut albedo = match info {
-                    Some(m) => m.base,
-                    None => [options.default_albedo; 3],
-                };
-                let mut emission = info.map_or([0.0; 3], |m| m.emission);
-                if let (Some(m), Some(uv)) = (info, &base_uv) {
-                    if let Some((img, _, s)) = m.base_texture {
-                        let mean = images[&img].mean_over(t.map(|i| uv[i]), &s);
-                        for c in 0..3 {
-                            albedo[c] *= mean[c];
-                        }
-                    }
+            for child in node.children().collect::<Vec<_>>().into_iter().rev() {
+                stack.push((child, world));
+            }
+            if let Some(light) = node.light() {
+                self.add_light(&node, &light, world)?;
+            }
+            let Some(mesh) = node.mesh() else { continue };
+            for prim in mesh.primitives() {
+                self.add_primitive(&mesh, &prim, world)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// A `KHR_lights_punctual` light of `node`, placed by its world transform.
+    fn add_light(
+        &mut self,
+        node: &gltf::Node,
+        light: &gltf::khr_lights_punctual::Light,
+        world: DMat4,
+    ) -> Result<()> {
+        let path = self.path;
+        let li = light.index();
+        let color = light.color().map(f64::from);
+        let intensity = f64::from(light.intensity());
+        let rgb = color.map(|c| c * intensity / LUMENS_PER_WATT);
+        let position = world.transform_point3(DVec3::ZERO);
+        let axis = world.transform_vector3(DVec3::NEG_Z);
+        let l = match light.kind() {
+            gltf::khr_lights_punctual::Kind::Point => Light::Point {
+                position,
+                intensity: rgb,
+            },
+            gltf::khr_lights_punctual::Kind::Spot {
+                inner_cone_angle,
+                outer_cone_angle,
+            } => Light::Spot {
+                position,
+                direction: axis.normalize_or_zero(),
+                intensity: rgb,
+                inner: f64::from(inner_cone_angle),
+                outer: f64::from(outer_cone_angle),
+            },
+            gltf::khr_lights_punctual::Kind::Directional => Light::Sun {
+                direction: axis.normalize_or_zero(),
+                irradiance: rgb,
+            },
+        };
+        l.validate(&format!(
+            "{}: KHR_lights_punctual.lights[{li}] (nodes[{}])",
+            path.display(),
+            node.index()
+        ))
+        .map_err(|e| {
+            scene_err(
+                path,
+                e.to_string()
+                    .trim_start_matches("invalid parameter: ")
+                    .to_string(),
+            )
+        })?;
+        if light.range().is_some() {
+            warn(&mut self.warnings, path, WarningKind::Unsupported, format!("KHR_lights_punctual.lights[{li}]: range is ignored (lights fall off as 1/r^2 everywhere)"));
+        }
+        self.scene.lights.push(l);
+        Ok(())
+    }
+
+    /// The triangles of one primitive (skipped with a warning when it is not triangles), in
+    /// world space, with their albedo and emission.
+    fn add_primitive(
+        &mut self,
+        mesh: &gltf::Mesh,
+        prim: &gltf::Primitive,
+        world: DMat4,
+    ) -> Result<()> {
+        let path = self.path;
+        let jp = format!("meshes[{}].primitives[{}]", mesh.index(), prim.index());
+        let mode = prim.mode();
+        if !matches!(
+            mode,
+            Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+        ) {
+            self.skipped_modes.insert(format!("{jp} ({mode:?})"));
+            return Ok(());
+        }
+        let local = self.positions(prim, &jp)?;
+        let nverts = local.len();
+        let indices = self.indices(prim, &jp, nverts)?;
+        let tris = assemble(mode, &indices);
+        let material = prim.material();
+        let info = material.index().and_then(|i| self.materials.get(i));
+        let colors = self.colors(prim, &jp, nverts)?;
+        let base_uv = match info.and_then(|m| m.base_texture) {
+            Some((_, set, _)) => self.uv(prim, &jp, nverts, set)?,
+            None => None,
+        };
+        let emissive_uv = match info.and_then(|m| m.emissive_texture) {
+            Some((_, set, _)) => self.uv(prim, &jp, nverts, set)?,
+            None => None,
+        };
+        if info.is_some_and(|m| m.base_texture.is_some()) && base_uv.is_none() {
+            warn(&mut self.warnings, path, WarningKind::Texture, format!("{jp}: material '{}' has a base colour texture but the primitive no texture coordinates; factor used", info.map_or("", |m| m.name.as_str())));
+        }
+        let base_index = self.scene.positions.len() as u32;
+        for p in &local {
+            self.scene
+                .positions
+                .push(world.transform_point3(DVec3::from_array(*p)));
+        }
+        let material_id = material.index().map(|i| i as u32);
+        let mirrored = world.determinant() < 0.0;
+        for t in &tris {
+            let t = if mirrored { [t[0], t[2], t[1]] } else { *t };
+            self.scene.triangles.push(t.map(|i| base_index + i as u32));
+            self.scene.material.push(material_id);
+            let (albedo, emission) =
+                self.colours_of(info, t, base_uv.as_deref(), emissive_uv.as_deref(), &colors);
+            self.scene.albedo.push(albedo);
+            self.scene.emission.push(emission);
+        }
+        Ok(())
+    }
+
+    /// A primitive's POSITION values (VEC3 FLOAT, finite), in its node's frame.
+    fn positions(&self, prim: &gltf::Primitive, jp: &str) -> Result<Vec<[f64; 3]>> {
+        let path = self.path;
+        let Some(pos_acc) = prim.get(&gltf::Semantic::Positions) else {
+            return Err(scene_err(path, format!("{jp}: no POSITION attribute")));
+        };
+        if pos_acc.data_type() != DataType::F32 || pos_acc.dimensions() != Dimensions::Vec3 {
+            return Err(scene_err(
+                path,
+                format!("{jp}.attributes.POSITION: must be VEC3 FLOAT"),
+            ));
+        }
+        let local = read_accessor::<3>(
+            path,
+            &pos_acc,
+            self.buffers,
+            &format!("{jp}.attributes.POSITION"),
+        )?;
+        if let Some(v) = local.iter().position(|p| p.iter().any(|x| !x.is_finite())) {
+            return Err(scene_err(
+                path,
+                format!("{jp}.attributes.POSITION: vertex {v} is not finite"),
+            ));
+        }
+        Ok(local)
+    }
+
+    /// A primitive's vertex indices (unsigned integer scalars below `nverts`), or every vertex
+    /// in order when it has none.
+    fn indices(&self, prim: &gltf::Primitive, jp: &str, nverts: usize) -> Result<Vec<usize>> {
+        let path = self.path;
+        let Some(acc) = prim.indices() else {
+            return Ok((0..nverts).collect());
+        };
+        if !matches!(
+            acc.data_type(),
+            DataType::U8 | DataType::U16 | DataType::U32
+        ) || acc.dimensions() != Dimensions::Scalar
+        {
+            return Err(scene_err(
+                path,
+                format!("{jp}.indices: must be unsigned integer scalars"),
+            ));
+        }
+        let raw = read_accessor::<1>(path, &acc, self.buffers, &format!("{jp}.indices"))?;
+        let mut out = Vec::with_capacity(raw.len());
+        for (k, r) in raw.iter().enumerate() {
+            let i = r[0] as usize;
+            if i >= nverts {
+                return Err(scene_err(
+                    path,
+                    format!(
+                        "{jp}.indices: index {i} at position {k} out of range ({nverts} vertices)"
+                    ),
+                ));
+            }
+            out.push(i);
+        }
+        Ok(out)
+    }
+
+    /// A primitive's texture coordinates of set `set`, one per vertex, if it has them.
+    fn uv(
+        &self,
+        prim: &gltf::Primitive,
+        jp: &str,
+        nverts: usize,
+        set: u32,
+    ) -> Result<Option<Vec<[f64; 2]>>> {
+        let path = self.path;
+        match prim.get(&gltf::Semantic::TexCoords(set)) {
+            None => Ok(None),
+            Some(acc) => {
+                let uv = read_accessor::<2>(
+                    path,
+                    &acc,
+                    self.buffers,
+                    &format!("{jp}.attributes.TEXCOORD_{set}"),
+                )?;
+                if uv.len() != nverts {
+                    return Err(scene_err(
+                        path,
+                        format!(
+                            "{jp}.attributes.TEXCOORD_{set}: {} values for {nverts} vertices",
+                            uv.len()
+                        ),
+                    ));
                 }
-                if let (Some(m), Some(uv)) = (info, &emissive_uv) {
-                    if let Some((img, _, s)) = m.emissive_texture {
-                        let mean = images[&img].mean_over(t.map(|i| uv[i]), &s);
-                        for c in 0..3 {
-                            emission[c] *= mean[c];
-                        }
-                    }
-                }
-                if let Some(col) = &colors {
-                    for c in 0..3 {
-                        albedo[c] *= (col[t[0]][c] + col[t[1]][c] + col[t[2]][c]) / 3.0;
-                    }
-                }
-                if albedo.iter().any(|&a| a >= ALBEDO_MAX) {
-                    let name = info.map_or("(no material)".to_string(), |m| m.name.clone());
-                    *clamped.entry(name).or_default() += 1;
-                    albedo = albedo.map(|a| a.min(ALBEDO_MAX));
-                }
-                scene.albedo.push(albedo);
-                scene.emission.push(emission);
+                Ok(Some(uv))
             }
         }
     }
-    let mut modes: Vec<String> = skipped_modes.into_iter().collect();
-    modes.sort();
-    for m in modes {
-        warn(
-            &mut warnings,
-            WarningKind::Unsupported,
-            format!("{m}: not triangles, skipped"),
-        );
+
+    /// A primitive's `COLOR_0`, one per vertex (negative and non-finite values as 0), if it
+    /// has one.
+    fn colors(
+        &self,
+        prim: &gltf::Primitive,
+        jp: &str,
+        nverts: usize,
+    ) -> Result<Option<Vec<[f64; 3]>>> {
+        let path = self.path;
+        let Some(acc) = prim.get(&gltf::Semantic::Colors(0)) else {
+            return Ok(None);
+        };
+        let c = read_accessor::<3>(
+            path,
+            &acc,
+            self.buffers,
+            &format!("{jp}.attributes.COLOR_0"),
+        )?;
+        if c.len() != nverts {
+            return Err(scene_err(
+                path,
+                format!(
+                    "{jp}.attributes.COLOR_0: {} values for {nverts} vertices",
+                    c.len()
+                ),
+            ));
+        }
+        Ok(Some(
+            c.into_iter()
+                .map(|c| c.map(|x| if x.is_finite() { x.max(0.0) } else { 0.0 }))
+                .collect(),
+        ))
     }
-    let mut clamped: Vec<(String, usize)> = clamped.into_iter().collect();
-    clamped.sort();
-    for (name, n) in clamped {
-        warn(&mut warnings, WarningKind::Albedo, format!("material '{name}': albedo at or above {ALBEDO_MAX} on {n} triangles lowered to {ALBEDO_MAX} (the model needs albedo below 1)"));
-    }
-    if let Some(y) = options.emit_above {
-        for t in 0..scene.len() {
-            if scene.corners(t).iter().all(|p| p.y > y) {
-                scene.emission[t] = [options.emission; 3];
+
+    /// One triangle's albedo (material factor x texture mean x vertex colour mean, lowered to
+    /// [`ALBEDO_MAX`] and counted) and emission (factor x texture mean).
+    fn colours_of(
+        &mut self,
+        info: Option<&MaterialInfo>,
+        t: [usize; 3],
+        base_uv: Option<&[[f64; 2]]>,
+        emissive_uv: Option<&[[f64; 2]]>,
+        colors: &Option<Vec<[f64; 3]>>,
+    ) -> ([f64; 3], [f64; 3]) {
+        let mut albedo = match info {
+            Some(m) => m.base,
+            None => [self.options.default_albedo; 3],
+        };
+        let mut emission = info.map_or([0.0; 3], |m| m.emission);
+        if let (Some(m), Some(uv)) = (info, base_uv) {
+            if let Some((img, _, s)) = m.base_texture {
+                let mean = self.images[&img].mean_over(t.map(|i| uv[i]), &s);
+                for c in 0..3 {
+                    albedo[c] *= mean[c];
+                }
             }
         }
+        if let (Some(m), Some(uv)) = (info, emissive_uv) {
+            if let Some((img, _, s)) = m.emissive_texture {
+                let mean = self.images[&img].mean_over(t.map(|i| uv[i]), &s);
+                for c in 0..3 {
+                    emission[c] *= mean[c];
+                }
+            }
+        }
+        if let Some(col) = colors {
+            for c in 0..3 {
+                albedo[c] *= (col[t[0]][c] + col[t[1]][c] + col[t[2]][c]) / 3.0;
+            }
+        }
+        if albedo.iter().any(|&a| a >= ALBEDO_MAX) {
+            let name = info.map_or("(no material)".to_string(), |m| m.name.clone());
+            *self.clamped.entry(name).or_default() += 1;
+            albedo = albedo.map(|a| a.min(ALBEDO_MAX));
+        }
+        (albedo, emission)
     }
-    finish(path, scene, warnings)
+
+    /// The scene, and its warnings with those of the skipped primitives and lowered albedos
+    /// (each sorted) at the end.
+    fn finish_warnings(self) -> (Scene, Vec<Warning>) {
+        let path = self.path;
+        let mut warnings = self.warnings;
+        let mut modes: Vec<String> = self.skipped_modes.into_iter().collect();
+        modes.sort();
+        for m in modes {
+            warn(
+                &mut warnings,
+                path,
+                WarningKind::Unsupported,
+                format!("{m}: not triangles, skipped"),
+            );
+        }
+        let mut clamped: Vec<(String, usize)> = self.clamped.into_iter().collect();
+        clamped.sort();
+        for (name, n) in clamped {
+            warn(&mut warnings, path, WarningKind::Albedo, format!("material '{name}': albedo at or above {ALBEDO_MAX} on {n} triangles lowered to {ALBEDO_MAX} (the model needs albedo below 1)"));
+        }
+        (self.scene, warnings)
+    }
+}
+
+/// A primitive's triangles from its indices: TRIANGLES as they are, TRIANGLE_STRIP and
+/// TRIANGLE_FAN by the specification's formulas.
+fn assemble(mode: Mode, indices: &[usize]) -> Vec<[usize; 3]> {
+    match mode {
+        Mode::Triangles => indices
+            .chunks_exact(3)
+            .map(|c| [c[0], c[1], c[2]])
+            .collect(),
+        Mode::TriangleStrip => (0..indices.len().saturating_sub(2))
+            .map(|i| [indices[i], indices[i + 1 + i % 2], indices[i + 2 - i % 2]])
+            .collect(),
+        _ => (0..indices.len().saturating_sub(2))
+            .map(|i| [indices[i + 1], indices[i + 2], indices[0]])
+            .collect(),
+    }
 }
 
 /// The checks every loader ends with: some triangle, some non-degenerate triangle; warnings
