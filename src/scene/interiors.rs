@@ -379,6 +379,80 @@ fn wall_with_openings(
     );
 }
 
+/// The shell of a `w x h x d` room from the origin (floor y = 0, window wall z = 0): what
+/// [`Cad::big_rectangle`] makes of the floor, the ceiling (one polygon per x range of
+/// `ceiling`), the window wall ([`wall_with_openings`]), the back wall and the two side walls,
+/// in that order, with `extra` edge vertices on each (floor, ceiling, walls).
+struct Shell<'a> {
+    size: (f64, f64, f64),
+    extra: (usize, usize, usize),
+    ceiling: &'a [(f64, f64)],
+    /// The window wall's openings (x ranges) from y = sill to head, closed by panes of
+    /// `pane` when given.
+    window: ((f64, f64), &'a [(f64, f64)], Option<Material>),
+}
+
+impl Shell<'_> {
+    fn add(&self, cad: &mut Cad) {
+        let (w, h, d) = self.size;
+        let (floor_extra, ceiling_extra, wall_extra) = self.extra;
+        let up = v(0.0, 1.0, 0.0);
+        cad.big_rectangle(
+            [
+                v(0.0, 0.0, 0.0),
+                v(w, 0.0, 0.0),
+                v(w, 0.0, d),
+                v(0.0, 0.0, d),
+            ],
+            floor_extra,
+            up,
+            FLOOR,
+        );
+        for &(x0, x1) in self.ceiling {
+            cad.big_rectangle(
+                [v(x0, h, 0.0), v(x1, h, 0.0), v(x1, h, d), v(x0, h, d)],
+                ceiling_extra,
+                -up,
+                CEILING,
+            );
+        }
+        let (sill_head, openings, pane) = self.window;
+        wall_with_openings(
+            cad,
+            0.0,
+            (w, h),
+            sill_head,
+            openings,
+            v(0.0, 0.0, 1.0),
+            WALL,
+            pane,
+        );
+        cad.big_rectangle(
+            [v(0.0, 0.0, d), v(w, 0.0, d), v(w, h, d), v(0.0, h, d)],
+            wall_extra,
+            v(0.0, 0.0, -1.0),
+            WALL,
+        );
+        cad.big_rectangle(
+            [
+                v(0.0, 0.0, 0.0),
+                v(0.0, 0.0, d),
+                v(0.0, h, d),
+                v(0.0, h, 0.0),
+            ],
+            wall_extra,
+            v(1.0, 0.0, 0.0),
+            WALL,
+        );
+        cad.big_rectangle(
+            [v(w, 0.0, d), v(w, 0.0, 0.0), v(w, h, 0.0), v(w, h, d)],
+            wall_extra,
+            v(-1.0, 0.0, 0.0),
+            WALL,
+        );
+    }
+}
+
 /// Four thin vertical cylinders from y = 0 to `height` at the corners of the rectangle
 /// `[x0, x1] x [z0, z1]` (legs).
 #[allow(clippy::too_many_arguments)]
@@ -401,29 +475,9 @@ fn legs(
 pub fn classroom(seed: u64) -> Interior {
     let mut cad = Cad::new(seed);
     let (w, h, d) = (9.0, 3.0, 7.0);
-    let up = v(0.0, 1.0, 0.0);
 
-    // Room shell: the floor, the ceiling in two halves, four walls.
-    cad.big_rectangle(
-        [
-            v(0.0, 0.0, 0.0),
-            v(w, 0.0, 0.0),
-            v(w, 0.0, d),
-            v(0.0, 0.0, d),
-        ],
-        14,
-        up,
-        FLOOR,
-    );
-    for (x0, x1) in [(0.0, 4.5), (4.5, w)] {
-        cad.big_rectangle(
-            [v(x0, h, 0.0), v(x1, h, 0.0), v(x1, h, d), v(x0, h, d)],
-            9,
-            -up,
-            CEILING,
-        );
-    }
-    // Window wall (z = 0): four openings 1.6 m wide between 0.9 m and 2.5 m.
+    // Room shell: the floor, the ceiling in two halves, four walls; the window wall (z = 0)
+    // with four openings 1.6 m wide between 0.9 m and 2.5 m.
     let pier = (w - 4.0 * 1.6) / 5.0;
     let openings: Vec<(f64, f64)> = (0..4)
         .map(|i| {
@@ -431,40 +485,13 @@ pub fn classroom(seed: u64) -> Interior {
             (a, a + 1.6)
         })
         .collect();
-    wall_with_openings(
-        &mut cad,
-        0.0,
-        (w, h),
-        (0.9, 2.5),
-        &openings,
-        v(0.0, 0.0, 1.0),
-        WALL,
-        Some(SKY),
-    );
-    // Back wall (z = d), side walls.
-    cad.big_rectangle(
-        [v(0.0, 0.0, d), v(w, 0.0, d), v(w, h, d), v(0.0, h, d)],
-        8,
-        v(0.0, 0.0, -1.0),
-        WALL,
-    );
-    cad.big_rectangle(
-        [
-            v(0.0, 0.0, 0.0),
-            v(0.0, 0.0, d),
-            v(0.0, h, d),
-            v(0.0, h, 0.0),
-        ],
-        8,
-        v(1.0, 0.0, 0.0),
-        WALL,
-    );
-    cad.big_rectangle(
-        [v(w, 0.0, d), v(w, 0.0, 0.0), v(w, h, 0.0), v(w, h, d)],
-        8,
-        v(-1.0, 0.0, 0.0),
-        WALL,
-    );
+    Shell {
+        size: (w, h, d),
+        extra: (14, 9, 8),
+        ceiling: &[(0.0, 4.5), (4.5, w)],
+        window: ((0.9, 2.5), &openings, Some(SKY)),
+    }
+    .add(&mut cad);
 
     // Blackboard on the back wall, a door against the far side wall.
     cad.block(v(2.0, 0.9, d - 0.03), v(6.0, 2.1, d), BLACKBOARD);
@@ -476,45 +503,11 @@ pub fn classroom(seed: u64) -> Interior {
     cad.block(v(8.04, 0.0, 6.05), v(8.08, 0.72, 6.7), WOOD);
     cad.block(v(6.56, 0.25, 6.66), v(8.04, 0.7, 6.69), WOOD);
 
-    // Desks (1.2 x 0.6 m tops on four thin legs) with chairs behind them, facing the board.
+    // Desks with chairs behind them, facing the board.
     for row in 0..6 {
         let z = 1.0 + 0.9 * row as f64;
         for x in [1.4, 3.45, 5.55, 7.6] {
-            cad.block(v(x - 0.6, 0.72, z - 0.3), v(x + 0.6, 0.75, z + 0.3), WOOD);
-            legs(
-                &mut cad,
-                (x - 0.55, x + 0.55),
-                (z - 0.25, z + 0.25),
-                0.72,
-                0.02,
-                10,
-                METAL,
-            );
-            // Chair, pulled out by 0-10 cm.
-            let pull = 0.1 * cad.rng.next_f64();
-            let (cx, cz) = (x, z - 0.5 - pull);
-            cad.block(
-                v(cx - 0.21, 0.43, cz - 0.21),
-                v(cx + 0.21, 0.46, cz + 0.21),
-                CHAIR,
-            );
-            cad.block(
-                v(cx - 0.21, 0.52, cz - 0.22),
-                v(cx + 0.21, 0.85, cz - 0.2),
-                CHAIR,
-            );
-            legs(
-                &mut cad,
-                (cx - 0.18, cx + 0.18),
-                (cz - 0.18, cz + 0.18),
-                0.43,
-                0.012,
-                8,
-                METAL,
-            );
-            for px in [cx - 0.18, cx + 0.18] {
-                cad.cylinder(1, v(px, 0.46, cz - 0.18), 0.39, 0.012, 8, true, METAL);
-            }
+            desk_and_chair(&mut cad, x, z);
         }
     }
 
@@ -532,6 +525,45 @@ pub fn classroom(seed: u64) -> Interior {
     cad.build()
 }
 
+/// A classroom desk centred at (`x`, `z`) (a 1.2 x 0.6 m top on four thin legs) and its chair
+/// behind it, pulled out by 0-10 cm.
+fn desk_and_chair(cad: &mut Cad, x: f64, z: f64) {
+    cad.block(v(x - 0.6, 0.72, z - 0.3), v(x + 0.6, 0.75, z + 0.3), WOOD);
+    legs(
+        cad,
+        (x - 0.55, x + 0.55),
+        (z - 0.25, z + 0.25),
+        0.72,
+        0.02,
+        10,
+        METAL,
+    );
+    let pull = 0.1 * cad.rng.next_f64();
+    let (cx, cz) = (x, z - 0.5 - pull);
+    cad.block(
+        v(cx - 0.21, 0.43, cz - 0.21),
+        v(cx + 0.21, 0.46, cz + 0.21),
+        CHAIR,
+    );
+    cad.block(
+        v(cx - 0.21, 0.52, cz - 0.22),
+        v(cx + 0.21, 0.85, cz - 0.2),
+        CHAIR,
+    );
+    legs(
+        cad,
+        (cx - 0.18, cx + 0.18),
+        (cz - 0.18, cz + 0.18),
+        0.43,
+        0.012,
+        8,
+        METAL,
+    );
+    for px in [cx - 0.18, cx + 0.18] {
+        cad.cylinder(1, v(px, 0.46, cz - 0.18), 0.39, 0.012, 8, true, METAL);
+    }
+}
+
 const SLAT: Material = ("slat", [0.75, 0.75, 0.72], [0.0; 3]);
 const CORD: Material = ("cord", [0.6, 0.6, 0.58], [0.0; 3]);
 const SHADE: Material = ("shade", [0.6, 0.55, 0.45], [0.0; 3]);
@@ -547,66 +579,38 @@ const BOOKS: [Material; 3] = [
     ("book_cream", [0.7, 0.65, 0.5], [0.0; 3]),
 ];
 
+/// The office's window: from x = 0.9 to 3.1 m, y = 0.85 to 2.35 m, in the wall z = 0.
+const OFFICE_WINDOW: (f64, f64, f64, f64) = (0.9, 3.1, 0.85, 2.35);
+
 /// The office (see the module documentation), with polygon reversals and book widths drawn
 /// from `seed`. Its triangle count is within [`OFFICE_TRIANGLES`].
 pub fn office(seed: u64) -> Interior {
     let mut cad = Cad::new(seed);
     let (w, h, d) = (4.0, 2.8, 5.0);
-    let up = v(0.0, 1.0, 0.0);
-    let (wx0, wx1, sill, head) = (0.9, 3.1, 0.85, 2.35);
+    let (wx0, wx1, sill, head) = OFFICE_WINDOW;
 
     // Room shell: large polygons.
-    cad.big_rectangle(
-        [
-            v(0.0, 0.0, 0.0),
-            v(w, 0.0, 0.0),
-            v(w, 0.0, d),
-            v(0.0, 0.0, d),
-        ],
-        10,
-        up,
-        FLOOR,
-    );
-    cad.big_rectangle(
-        [v(0.0, h, 0.0), v(w, h, 0.0), v(w, h, d), v(0.0, h, d)],
-        10,
-        -up,
-        CEILING,
-    );
-    wall_with_openings(
-        &mut cad,
-        0.0,
-        (w, h),
-        (sill, head),
-        &[(wx0, wx1)],
-        v(0.0, 0.0, 1.0),
-        WALL,
-        None,
-    );
-    cad.big_rectangle(
-        [v(0.0, 0.0, d), v(w, 0.0, d), v(w, h, d), v(0.0, h, d)],
-        6,
-        v(0.0, 0.0, -1.0),
-        WALL,
-    );
-    cad.big_rectangle(
-        [
-            v(0.0, 0.0, 0.0),
-            v(0.0, 0.0, d),
-            v(0.0, h, d),
-            v(0.0, h, 0.0),
-        ],
-        6,
-        v(1.0, 0.0, 0.0),
-        WALL,
-    );
-    cad.big_rectangle(
-        [v(w, 0.0, d), v(w, 0.0, 0.0), v(w, h, 0.0), v(w, h, d)],
-        6,
-        v(-1.0, 0.0, 0.0),
-        WALL,
-    );
-    // The window's reveal, 25 cm deep, and the sky pane closing it.
+    Shell {
+        size: (w, h, d),
+        extra: (10, 10, 6),
+        ceiling: &[(0.0, w)],
+        window: ((sill, head), &[(wx0, wx1)], None),
+    }
+    .add(&mut cad);
+    window_reveal(&mut cad);
+    blinds(&mut cad);
+    let top = 0.76;
+    office_desk(&mut cad, top);
+    desk_lamp(&mut cad, top);
+    office_chair(&mut cad);
+    bookshelf(&mut cad, w);
+    cad.build()
+}
+
+/// The office window's reveal, 25 cm deep, and the sky pane closing it.
+fn window_reveal(cad: &mut Cad) {
+    let (wx0, wx1, sill, head) = OFFICE_WINDOW;
+    let up = v(0.0, 1.0, 0.0);
     let back = -0.25;
     cad.polygon(
         &[
@@ -658,9 +662,13 @@ pub fn office(seed: u64) -> Interior {
         v(0.0, 0.0, 1.0),
         OFFICE_SKY,
     );
+}
 
-    // Venetian blinds in front of the window: 66 slats 2.3 m x 25 mm x 0.8 mm, 21 mm apart,
-    // tilted 40 degrees about their long axis, a head rail, a bottom rail, four ladder cords.
+/// Venetian blinds in front of the office window: 66 slats 2.3 m x 25 mm x 0.8 mm, 21 mm
+/// apart, tilted 40 degrees about their long axis, a head rail, a bottom rail, four ladder
+/// cords.
+fn blinds(cad: &mut Cad) {
+    let (wx0, wx1, _, head) = OFFICE_WINDOW;
     let (bx0, bx1, bz) = (wx0 - 0.05, wx1 + 0.05, 0.06);
     let (c, s) = cos_sin_degrees(40);
     let across = v(0.0, s, c) * 0.0125;
@@ -698,9 +706,12 @@ pub fn office(seed: u64) -> Interior {
             );
         }
     }
+}
 
-    // Desk facing the window: a top on two side panels, a modesty panel.
-    let (dx0, dx1, dz0, dz1, top) = (1.2, 2.8, 1.2, 2.0, 0.76);
+/// The office desk facing the window, its top at height `top` (a top on two side panels, a
+/// modesty panel), with a monitor (stand, screen), a keyboard and a mug on it.
+fn office_desk(cad: &mut Cad, top: f64) {
+    let (dx0, dx1, dz0, dz1) = (1.2, 2.8, 1.2, 2.0);
     cad.block(v(dx0, top - 0.04, dz0), v(dx1, top, dz1), WOOD);
     cad.block(
         v(dx0 + 0.02, 0.0, dz0 + 0.05),
@@ -717,7 +728,6 @@ pub fn office(seed: u64) -> Interior {
         v(dx1 - 0.05, top - 0.06, dz0 + 0.07),
         WOOD,
     );
-    // Monitor (stand, screen), keyboard, mug.
     cad.block(v(1.9, top, 1.3), v(2.1, top + 0.01, 1.45), PLASTIC);
     cad.block(
         v(1.98, top + 0.01, 1.36),
@@ -727,7 +737,12 @@ pub fn office(seed: u64) -> Interior {
     cad.block(v(1.72, top + 0.12, 1.33), v(2.28, top + 0.45, 1.36), SCREEN);
     cad.block(v(1.78, top, 1.55), v(2.22, top + 0.02, 1.7), PLASTIC);
     cad.cylinder(1, v(2.45, top, 1.75), 0.1, 0.04, 20, true, MUG);
-    // Desk lamp: a base, an arm, a shade (outside and inside) with an emissive bulb in it.
+}
+
+/// A desk lamp standing on the desk top at height `top`: a base, an arm, a shade (outside and
+/// inside) with an emissive bulb in it.
+fn desk_lamp(cad: &mut Cad, top: f64) {
+    let up = v(0.0, 1.0, 0.0);
     let (lx, lz) = (1.45, 1.45);
     cad.cylinder(1, v(lx, top, lz), 0.02, 0.07, 24, true, METAL);
     cad.cylinder(1, v(lx, top + 0.02, lz), 0.32, 0.008, 8, true, METAL);
@@ -744,7 +759,10 @@ pub fn office(seed: u64) -> Interior {
     let inner: Vec<DVec3> = ring.iter().map(|p| v(p.x, p.y - 0.001, p.z)).collect();
     cad.polygon(&inner, -up, SHADE);
     cad.cylinder(1, v(lx, shade + 0.04, lz), 0.05, 0.02, 12, true, BULB);
-    // Chair: a base disc, a column, a seat, a back.
+}
+
+/// The office chair, pulled out by 0-10 cm: a base disc, a column, a seat, a back.
+fn office_chair(cad: &mut Cad) {
     let (chx, chz) = (2.0, 2.45 + 0.1 * cad.rng.next_f64());
     cad.cylinder(1, v(chx, 0.02, chz), 0.03, 0.3, 24, true, PLASTIC);
     cad.cylinder(1, v(chx, 0.05, chz), 0.38, 0.025, 12, true, METAL);
@@ -758,8 +776,11 @@ pub fn office(seed: u64) -> Interior {
         v(chx + 0.22, 1.0, chz + 0.28),
         CHAIR,
     );
+}
 
-    // Bookshelf against the side wall x = w: two sides, a back, six boards, books.
+/// A bookshelf against the side wall x = `w`: two sides, a back, six boards, books of drawn
+/// widths and heights on the lower five.
+fn bookshelf(cad: &mut Cad, w: f64) {
     let (sx0, sx1, sz0, sz1, sh) = (w - 0.36, w - 0.01, 2.5, 4.0, 2.0);
     cad.block(v(sx0, 0.0, sz0), v(sx1, sh, sz0 + 0.02), SHELF);
     cad.block(v(sx0, 0.0, sz1 - 0.02), v(sx1, sh, sz1), SHELF);
@@ -792,5 +813,4 @@ pub fn office(seed: u64) -> Interior {
             b += 1;
         }
     }
-    cad.build()
 }
