@@ -11,7 +11,6 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use crate::error::{Error, Result};
-use crate::geometry::sanitize;
 
 /// Writes a file atomically: `fill` writes the content into a buffered temporary file next to
 /// `path`, which is then synced and renamed to `path`.
@@ -63,6 +62,15 @@ fn create_temp(dir: &Path, name: &std::ffi::OsStr) -> std::io::Result<(PathBuf, 
             Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
             Err(e) => return Err(e),
         }
+    }
+}
+
+/// Replaces a non-finite value by 0 so that no NaN or infinity ever reaches an output.
+pub fn sanitize(x: f64) -> f64 {
+    if x.is_finite() {
+        x
+    } else {
+        0.0
     }
 }
 

@@ -222,12 +222,12 @@ fn closed_objects_have_no_exposed_backs() {
         ("cube", cube),
     ] {
         let patches = build_patches(&scene, None);
-        let exposed = antiradiance::solve::hierarchical::model::exposed_backs(&patches);
+        let exposed = antiradiance::solve::model::exposed_backs(&patches);
         assert_eq!(exposed.iter().filter(|&&b| b).count(), 0, "{name}");
     }
     // The occluder's plate is an open sheet: its back (facing the floor) is exposed.
     let patches = build_patches(&generated::occluder_scene(), None);
-    let exposed = antiradiance::solve::hierarchical::model::exposed_backs(&patches);
+    let exposed = antiradiance::solve::model::exposed_backs(&patches);
     assert!(
         exposed[2] && exposed[3] && !exposed[0] && !exposed[4],
         "{exposed:?}"
@@ -250,6 +250,6 @@ fn back_to_back_twins_are_not_exposed() {
         scene.material.push(m);
     }
     let patches = build_patches(&scene, None);
-    let exposed = antiradiance::solve::hierarchical::model::exposed_backs(&patches);
+    let exposed = antiradiance::solve::model::exposed_backs(&patches);
     assert_eq!(exposed.iter().filter(|&&b| b).count(), 0, "{exposed:?}");
 }

@@ -6,8 +6,8 @@
 use antiradiance::mesh::{build_patches, Patches};
 use antiradiance::progress::Progress;
 use antiradiance::scene::generated;
-use antiradiance::solve::hierarchical::model::ModelStats;
 use antiradiance::solve::hierarchical::Prepared;
+use antiradiance::solve::model::ModelStats;
 use antiradiance::solve::solution::Solution;
 use antiradiance::solve::SolverOptions;
 

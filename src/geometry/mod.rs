@@ -481,15 +481,6 @@ pub fn subdivide(tri: &Tri, m: usize) -> impl Iterator<Item = Tri> + '_ {
     })
 }
 
-/// Replaces a non-finite value by 0 so that no NaN or infinity ever reaches an output.
-pub fn sanitize(x: f64) -> f64 {
-    if x.is_finite() {
-        x
-    } else {
-        0.0
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

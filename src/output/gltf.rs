@@ -297,8 +297,41 @@ pub fn write_scene_glb(path: &Path, scene: &Scene) -> Result<()> {
             path.display()
         )));
     }
+    let (kind_of, materials) = scene_materials(scene);
+    let mut b = Builder::default();
+    let primitives = scene_primitives(&mut b, scene, &kind_of);
+    let (nodes, lights) = light_nodes(scene);
+    let mut used = Vec::new();
+    if materials.iter().any(|m| m.get("extensions").is_some()) {
+        used.push("KHR_materials_emissive_strength");
+    }
+    let mut json = json!({
+        "asset": { "version": "2.0", "generator": concat!("antiradiance ", env!("CARGO_PKG_VERSION")) },
+        "scene": 0,
+        "scenes": [{ "nodes": (0..nodes.len()).collect::<Vec<_>>() }],
+        "nodes": nodes,
+        "meshes": [{ "primitives": primitives }],
+        "materials": materials,
+    });
+    if !lights.is_empty() {
+        used.push("KHR_lights_punctual");
+        json["extensions"] = json!({ "KHR_lights_punctual": { "lights": lights } });
+    }
+    if !used.is_empty() {
+        json["extensionsUsed"] = json!(used);
+    }
+    let bytes = b.glb(json);
+    if bytes.len() > u32::MAX as usize {
+        return Err(too_large(path, bytes.len()));
+    }
+    write_atomic(path, |w| w.write_all(&bytes))
+}
+
+/// Every distinct (material, albedo, emission) of `scene` as a glTF material, in order of first
+/// use, and each triangle's index among them.
+fn scene_materials(scene: &Scene) -> (Vec<usize>, Vec<Value>) {
+    let n = scene.len();
     let material_of = |t: usize| scene.material.get(t).copied().flatten();
-    // Every distinct (material, albedo, emission) gets a glTF material.
     let mut kinds: Vec<(Option<u32>, [u64; 6])> = Vec::new();
     let key = |t: usize| {
         let a = scene.albedo[t];
@@ -348,7 +381,13 @@ pub fn write_scene_glb(path: &Path, scene: &Scene) -> Result<()> {
         }
         materials.push(mat);
     }
-    let mut b = Builder::default();
+    (kind_of, materials)
+}
+
+/// One primitive per run of consecutive triangles of the same material (`kind_of`), three
+/// vertices per triangle, into `b`.
+fn scene_primitives(b: &mut Builder, scene: &Scene, kind_of: &[usize]) -> Vec<Value> {
+    let n = scene.len();
     let mut primitives = Vec::new();
     let mut t = 0;
     while t < n {
@@ -373,6 +412,12 @@ pub fn write_scene_glb(path: &Path, scene: &Scene) -> Result<()> {
         }));
         t = end;
     }
+    primitives
+}
+
+/// The nodes (the mesh's, then one per analytic light but the sky) and the
+/// `KHR_lights_punctual` lights they place.
+fn light_nodes(scene: &Scene) -> (Vec<Value>, Vec<Value>) {
     let mut nodes = vec![json!({ "mesh": 0 })];
     let mut lights = Vec::new();
     for light in &scene.lights {
@@ -420,30 +465,7 @@ pub fn write_scene_glb(path: &Path, scene: &Scene) -> Result<()> {
         lights.push(l);
         nodes.push(node);
     }
-    let mut used = Vec::new();
-    if materials.iter().any(|m| m.get("extensions").is_some()) {
-        used.push("KHR_materials_emissive_strength");
-    }
-    let mut json = json!({
-        "asset": { "version": "2.0", "generator": concat!("antiradiance ", env!("CARGO_PKG_VERSION")) },
-        "scene": 0,
-        "scenes": [{ "nodes": (0..nodes.len()).collect::<Vec<_>>() }],
-        "nodes": nodes,
-        "meshes": [{ "primitives": primitives }],
-        "materials": materials,
-    });
-    if !lights.is_empty() {
-        used.push("KHR_lights_punctual");
-        json["extensions"] = json!({ "KHR_lights_punctual": { "lights": lights } });
-    }
-    if !used.is_empty() {
-        json["extensionsUsed"] = json!(used);
-    }
-    let bytes = b.glb(json);
-    if bytes.len() > u32::MAX as usize {
-        return Err(too_large(path, bytes.len()));
-    }
-    write_atomic(path, |w| w.write_all(&bytes))
+    (nodes, lights)
 }
 
 /// The unit quaternion (x, y, z, w) turning glTF's light axis -Z onto `direction`.

@@ -17,12 +17,14 @@ use crate::progress::Progress;
 use crate::solve::budget::{self, Budget, MemoryStats};
 use crate::solve::convergence::{damp_if_damped, end_sweep, start_damping};
 use crate::solve::health::{self, Guard};
-use crate::solve::hierarchical::model;
+use crate::solve::model;
 use crate::solve::solution::{Solution, SolveStats};
 use crate::solve::{
     change_ratio, change_sums, finish, source_and_albedo_max, Convergence, SolverOptions,
 };
-use crate::transport::{couple, gather_entries, is_near, Coupling, Entry, PatchGeom, Receiver};
+use crate::transport::{
+    couple, gather_entries, is_near, Coupling, CouplingParams, Entry, PatchGeom, Receiver,
+};
 
 /// A receiver's cached near pairs: (sender, coupling).
 type NearList = Vec<(u32, Coupling)>;
@@ -50,7 +52,7 @@ pub fn solve_dense(
     let nb = bins.len();
     let n = patches.len();
     let params = options.coupling();
-    let back = crate::solve::hierarchical::model::back_blocking(patches, options);
+    let back = crate::solve::model::back_blocking(patches, options);
     let budget = Budget::start(options.memory_limit());
     let estimate = budget::dense_bytes(n as u64, options.bins, options.near_quadrature);
     let refuse = |bytes: u64| {
@@ -85,154 +87,34 @@ pub fn solve_dense(
         ..SolveStats::default()
     };
     let mut convergence = Convergence::default();
-    // The bound on B (maximum principle; not for unoccluded radiosity) and the mass the sweeps'
-    // changes are measured against.
-    let (source_max, rho_max) = source_and_albedo_max(patches);
-    let bound = health::radiance_bound(source_max, rho_max);
-    let reference_mass: f64 = active
-        .iter()
-        .map(|&p| patches.area[p] * emission[p].iter().map(|x| x.abs()).sum::<f64>())
-        .sum::<f64>()
-        / (1.0 - rho_max.clamp(0.0, 0.9999));
-    let mut guard = Guard::new(
-        options.antiradiance.then_some(bound),
-        reference_mass,
-        patches.emission_scale,
-    );
+    let (mut guard, bound) = sweep_guard(patches, options, emission, &active);
     // In a convex enclosure the unoccluded rows are the visible ones and may be capped at 1.
     let convex = model::patches_convex(patches);
 
-    // Near pairs: computed once, kept per receiver as (sender, entries). Each receiver's
-    // quadrature is fixed by its nearest exchanging sender (one set of points per receiver).
-    // Their bytes are counted as they are made; past the budget the rest are skipped and the
-    // solve refused.
-    let near_bytes = AtomicU64::new(0);
-    let over = AtomicBool::new(false);
-    let (receivers, near): (Vec<Option<Receiver>>, Vec<NearList>) = geoms
-        .par_iter()
-        .enumerate()
-        .map(|(r, rg)| {
-            let Some(rg) = rg else {
-                return (None, Vec::new());
-            };
-            if over.load(Ordering::Relaxed) {
-                return (None, Vec::new());
-            }
-            let near_senders: Vec<usize> = active
-                .iter()
-                .copied()
-                .filter(|&s| {
-                    let sg = geoms[s].as_ref().expect("active patches have geometry");
-                    s != r && is_near(rg, sg, &bins, &params)
-                })
-                .collect();
-            let receiver = Receiver::for_senders(
-                *rg,
-                near_senders.iter().filter_map(|&s| geoms[s].as_ref()),
-                &params,
-            );
-            let mut list = Vec::new();
-            let mut coupling = Coupling::new();
-            for s in near_senders {
-                let sg = geoms[s].as_ref().expect("active patches have geometry");
-                couple(&receiver, sg, &bins, &params, &mut coupling);
-                if !coupling.is_empty() {
-                    list.push((s as u32, coupling.clone()));
-                }
-            }
-            let bytes: u64 = list
-                .iter()
-                .map(|(_, c)| budget::dense_near_pair_bytes(c.len()))
-                .sum();
-            let held = near_bytes.fetch_add(bytes, Ordering::Relaxed) + bytes;
-            if !budget.fits(estimate + held) {
-                over.store(true, Ordering::Relaxed);
-            }
-            (Some(receiver), list)
-        })
-        .unzip();
-    let near_bytes = near_bytes.into_inner();
-    if over.into_inner() {
-        return Err(refuse(estimate + near_bytes));
+    let near = NearPairs::compute(&geoms, &active, &bins, &params, &budget, estimate);
+    if near.over {
+        return Err(refuse(estimate + near.bytes));
     }
     stats.solver_bytes += near
+        .lists
         .iter()
         .map(|l| (l.len() * std::mem::size_of::<(u32, Coupling)>()) as u64)
         .sum::<u64>();
+    let dense = Dense {
+        patches,
+        options,
+        bins: &bins,
+        params: &params,
+        back: &back,
+        geoms: &geoms,
+        active: &active,
+        emission,
+        convex,
+        near: &near,
+    };
 
     for iteration in 1..=options.max_iterations {
-        // One Jacobi sweep: every receiver gathers from every active sender.
-        let sweep: Vec<ReceiverSweep> = next_radiance
-            .par_iter_mut()
-            .zip(next_anti.par_chunks_mut(nb))
-            .enumerate()
-            .map(|(r, (b_out, a_out))| {
-                let Some(receiver) = &receivers[r] else {
-                    *b_out = emission[r];
-                    a_out.fill([0.0; 3]);
-                    return ReceiverSweep {
-                        largest: emission[r].iter().fold(0.0, |m, x| m.max(x.abs())),
-                        finite: true,
-                        ..ReceiverSweep::default()
-                    };
-                };
-                let mut h = [0.0f64; 3];
-                let mut a_acc = vec![[0.0f64; 3]; nb];
-                let mut coupling = Coupling::new();
-                let mut row = 0.0;
-                let mut links = 0u64;
-                let mut gather = |s: usize, entries: &[Entry]| {
-                    links += 1;
-                    row += gather_entries(
-                        entries,
-                        radiance[s],
-                        |bin| anti[s * nb + bin].map(f64::from),
-                        options.antiradiance,
-                        params.two_sided || back[s],
-                        &mut h,
-                        &mut a_acc,
-                    );
-                };
-                for (s, entries) in &near[r] {
-                    gather(*s as usize, entries);
-                }
-                for &s in &active {
-                    let sg = geoms[s].as_ref().expect("active patches have geometry");
-                    if s == r || is_near(&receiver.geom, sg, &bins, &params) {
-                        continue;
-                    }
-                    couple(receiver, sg, &bins, &params, &mut coupling);
-                    if !coupling.is_empty() {
-                        gather(s, &coupling);
-                    }
-                }
-                // A row above 1 in a convex enclosure is discretization error: scale it to 1.
-                let capped = convex && row > 1.0 + health::ROW_SUM_TOLERANCE;
-                let scale = if capped { 1.0 / row } else { 1.0 };
-                let mut largest = 0.0f64;
-                let mut finite = true;
-                for c in 0..3 {
-                    b_out[c] = emission[r][c] + patches.albedo[r][c] * (scale * h[c]);
-                    largest = largest.max(b_out[c].abs());
-                    finite &= b_out[c].is_finite();
-                }
-                for (dst, src) in a_out.iter_mut().zip(&a_acc) {
-                    *dst = if options.antiradiance {
-                        src.map(|x| x as f32)
-                    } else {
-                        [0.0; 3]
-                    };
-                    finite &= dst.iter().all(|x| x.is_finite());
-                }
-                ReceiverSweep {
-                    row,
-                    links,
-                    capped,
-                    largest,
-                    finite,
-                }
-            })
-            .collect();
+        let sweep = dense.sweep(&radiance, &anti, &mut next_radiance, &mut next_anti);
         if iteration == 1 {
             stats.max_row_sum = sweep.iter().map(|r| r.row).fold(0.0, f64::max);
             stats.links = sweep.iter().map(|r| r.links).sum();
@@ -268,18 +150,7 @@ pub fn solve_dense(
     }
     stats.residual = convergence.residual;
     stats.elements = active.len();
-    stats.memory = Some(MemoryStats {
-        limit_bytes: budget.limit,
-        base_bytes: budget.base,
-        estimate_bytes: estimate + near_bytes,
-        peak_bytes: crate::memory::peak_rss_bytes(),
-        coarsened: Vec::new(),
-        attempts: 0,
-        epsilon: 0.0,
-        bins: options.bins,
-        split_depth: 0,
-        discarded_seconds: 0.0,
-    });
+    stats.memory = Some(memory_stats(&budget, estimate + near.bytes, options.bins));
     Ok(finish(
         patches,
         radiance,
@@ -287,6 +158,236 @@ pub fn solve_dense(
         options.clamp_negative,
         options.antiradiance.then_some(bound),
     ))
+}
+
+/// The memory figures of a dense solve: its estimate and the measured peak (it is never
+/// coarsened).
+fn memory_stats(budget: &Budget, estimate_bytes: u64, bins: usize) -> MemoryStats {
+    MemoryStats {
+        limit_bytes: budget.limit,
+        base_bytes: budget.base,
+        estimate_bytes,
+        peak_bytes: crate::memory::peak_rss_bytes(),
+        coarsened: Vec::new(),
+        attempts: 0,
+        epsilon: 0.0,
+        bins,
+        split_depth: 0,
+        discarded_seconds: 0.0,
+    }
+}
+
+/// The [`Guard`] of the dense sweeps and the bound on B it checks (maximum principle; not for
+/// unoccluded radiosity): changes are measured against the mass `sum a E / (1 - rho_max)`.
+fn sweep_guard(
+    patches: &Patches,
+    options: &SolverOptions,
+    emission: &[[f64; 3]],
+    active: &[usize],
+) -> (Guard, f64) {
+    let (source_max, rho_max) = source_and_albedo_max(patches);
+    let bound = health::radiance_bound(source_max, rho_max);
+    let reference_mass: f64 = active
+        .iter()
+        .map(|&p| patches.area[p] * emission[p].iter().map(|x| x.abs()).sum::<f64>())
+        .sum::<f64>()
+        / (1.0 - rho_max.clamp(0.0, 0.9999));
+    let guard = Guard::new(
+        options.antiradiance.then_some(bound),
+        reference_mass,
+        patches.emission_scale,
+    );
+    (guard, bound)
+}
+
+/// The near pairs, computed once: per receiver its [`Receiver`] (its quadrature fixed by its
+/// nearest exchanging sender: one set of points per receiver) and its (sender, coupling) list.
+struct NearPairs {
+    receivers: Vec<Option<Receiver>>,
+    lists: Vec<NearList>,
+    /// Bytes of the lists, counted as they are made.
+    bytes: u64,
+    /// True when they went past the budget: the rest were skipped and the solve is refused.
+    over: bool,
+}
+
+impl NearPairs {
+    fn compute(
+        geoms: &[Option<PatchGeom>],
+        active: &[usize],
+        bins: &Bins,
+        params: &CouplingParams,
+        budget: &Budget,
+        estimate: u64,
+    ) -> NearPairs {
+        let near_bytes = AtomicU64::new(0);
+        let over = AtomicBool::new(false);
+        let (receivers, lists): (Vec<Option<Receiver>>, Vec<NearList>) = geoms
+            .par_iter()
+            .enumerate()
+            .map(|(r, rg)| {
+                let Some(rg) = rg else {
+                    return (None, Vec::new());
+                };
+                if over.load(Ordering::Relaxed) {
+                    return (None, Vec::new());
+                }
+                let near_senders: Vec<usize> = active
+                    .iter()
+                    .copied()
+                    .filter(|&s| {
+                        let sg = geoms[s].as_ref().expect("active patches have geometry");
+                        s != r && is_near(rg, sg, bins, params)
+                    })
+                    .collect();
+                let receiver = Receiver::for_senders(
+                    *rg,
+                    near_senders.iter().filter_map(|&s| geoms[s].as_ref()),
+                    params,
+                );
+                let mut list = Vec::new();
+                let mut coupling = Coupling::new();
+                for s in near_senders {
+                    let sg = geoms[s].as_ref().expect("active patches have geometry");
+                    couple(&receiver, sg, bins, params, &mut coupling);
+                    if !coupling.is_empty() {
+                        list.push((s as u32, coupling.clone()));
+                    }
+                }
+                let bytes: u64 = list
+                    .iter()
+                    .map(|(_, c)| budget::dense_near_pair_bytes(c.len()))
+                    .sum();
+                let held = near_bytes.fetch_add(bytes, Ordering::Relaxed) + bytes;
+                if !budget.fits(estimate + held) {
+                    over.store(true, Ordering::Relaxed);
+                }
+                (Some(receiver), list)
+            })
+            .unzip();
+        NearPairs {
+            receivers,
+            lists,
+            bytes: near_bytes.into_inner(),
+            over: over.into_inner(),
+        }
+    }
+}
+
+/// What every dense sweep reads: the scene, the options and the cached near pairs.
+struct Dense<'a> {
+    patches: &'a Patches,
+    options: &'a SolverOptions,
+    bins: &'a Bins,
+    params: &'a CouplingParams,
+    back: &'a [bool],
+    geoms: &'a [Option<PatchGeom>],
+    active: &'a [usize],
+    emission: &'a [[f64; 3]],
+    /// True in a convex enclosure, where a form-factor row above 1 is scaled to 1.
+    convex: bool,
+    near: &'a NearPairs,
+}
+
+impl Dense<'_> {
+    /// One Jacobi sweep: every receiver gathers from every active sender, from `radiance` and
+    /// `anti` into `next_radiance` and `next_anti`.
+    fn sweep(
+        &self,
+        radiance: &[[f64; 3]],
+        anti: &[[f32; 3]],
+        next_radiance: &mut [[f64; 3]],
+        next_anti: &mut [[f32; 3]],
+    ) -> Vec<ReceiverSweep> {
+        let nb = self.bins.len();
+        next_radiance
+            .par_iter_mut()
+            .zip(next_anti.par_chunks_mut(nb))
+            .enumerate()
+            .map(|(r, (b_out, a_out))| self.gather(r, radiance, anti, b_out, a_out))
+            .collect()
+    }
+
+    /// Receiver `r`'s B and antiradiance bins (`b_out`, `a_out`): its cached near pairs, then
+    /// every far sender coupled anew.
+    fn gather(
+        &self,
+        r: usize,
+        radiance: &[[f64; 3]],
+        anti: &[[f32; 3]],
+        b_out: &mut [f64; 3],
+        a_out: &mut [[f32; 3]],
+    ) -> ReceiverSweep {
+        let (options, params, bins) = (self.options, self.params, self.bins);
+        let (emission, back) = (self.emission, self.back);
+        let nb = bins.len();
+        let Some(receiver) = &self.near.receivers[r] else {
+            *b_out = emission[r];
+            a_out.fill([0.0; 3]);
+            return ReceiverSweep {
+                largest: emission[r].iter().fold(0.0, |m, x| m.max(x.abs())),
+                finite: true,
+                ..ReceiverSweep::default()
+            };
+        };
+        let mut h = [0.0f64; 3];
+        let mut a_acc = vec![[0.0f64; 3]; nb];
+        let mut coupling = Coupling::new();
+        let mut row = 0.0;
+        let mut links = 0u64;
+        let mut gather = |s: usize, entries: &[Entry]| {
+            links += 1;
+            row += gather_entries(
+                entries,
+                radiance[s],
+                |bin| anti[s * nb + bin].map(f64::from),
+                options.antiradiance,
+                params.two_sided || back[s],
+                &mut h,
+                &mut a_acc,
+            );
+        };
+        for (s, entries) in &self.near.lists[r] {
+            gather(*s as usize, entries);
+        }
+        for &s in self.active {
+            let sg = self.geoms[s]
+                .as_ref()
+                .expect("active patches have geometry");
+            if s == r || is_near(&receiver.geom, sg, bins, params) {
+                continue;
+            }
+            couple(receiver, sg, bins, params, &mut coupling);
+            if !coupling.is_empty() {
+                gather(s, &coupling);
+            }
+        }
+        // A row above 1 in a convex enclosure is discretization error: scale it to 1.
+        let capped = self.convex && row > 1.0 + health::ROW_SUM_TOLERANCE;
+        let scale = if capped { 1.0 / row } else { 1.0 };
+        let mut largest = 0.0f64;
+        let mut finite = true;
+        for c in 0..3 {
+            b_out[c] = emission[r][c] + self.patches.albedo[r][c] * (scale * h[c]);
+            largest = largest.max(b_out[c].abs());
+            finite &= b_out[c].is_finite();
+        }
+        for (dst, src) in a_out.iter_mut().zip(&a_acc) {
+            *dst = if options.antiradiance {
+                src.map(|x| x as f32)
+            } else {
+                [0.0; 3]
+            };
+            finite &= dst.iter().all(|x| x.is_finite());
+        }
+        ReceiverSweep {
+            row,
+            links,
+            capped,
+            largest,
+            finite,
+        }
+    }
 }
 
 /// What one receiver's gather in a dense sweep reports (`Default` is for fields left unset).

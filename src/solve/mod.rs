@@ -10,6 +10,7 @@ pub mod dense;
 pub mod direct;
 pub mod health;
 pub mod hierarchical;
+pub mod model;
 pub mod options;
 pub mod relight;
 pub mod solution;

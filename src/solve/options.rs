@@ -20,7 +20,7 @@ pub struct SolverOptions {
     /// Antiradiance from both sides of every surface. Default false: each surface blocks on
     /// the sides [`Self::block_exposed_backs`] decides.
     pub two_sided: bool,
-    /// Surfaces whose back is exposed to light ([`crate::solve::hierarchical::model::exposed_backs`]: wrongly
+    /// Surfaces whose back is exposed to light ([`crate::solve::model::exposed_backs`]: wrongly
     /// oriented walls, open sheets) also create antiradiance from light arriving at their back,
     /// so a one-sided surface lit from behind absorbs and casts a shadow. Default true; false
     /// gives front-only antiradiance everywhere (exact for closed, consistently oriented

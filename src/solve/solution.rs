@@ -2,7 +2,7 @@
 
 use serde::Serialize;
 
-pub use crate::geometry::sanitize;
+pub use crate::files::sanitize;
 use crate::mesh::Patches;
 use crate::solve::health::{self, FailureKind, SolveFailure};
 
@@ -127,7 +127,7 @@ pub struct ModelStats {
     pub antiradiance: bool,
     /// True when the scene is a convex enclosure: all elements see each other unoccluded.
     pub convex_enclosure: bool,
-    /// Input patches whose back is exposed to light and blocks it ([`crate::solve::hierarchical::model::exposed_backs`]; all of
+    /// Input patches whose back is exposed to light and blocks it ([`crate::solve::model::exposed_backs`]; all of
     /// them with `two_sided`, none with `block_exposed_backs` off).
     pub back_blocking_patches: u64,
     /// Antiradiance values stored per sweep state: (element, bin) slots that some link both

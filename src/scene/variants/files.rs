@@ -1,5 +1,5 @@
-//! Variant files: the OBJ + MTL + map writer, the map reader and the mapping of results back
-//! to the original triangles.
+//! Variant files: the OBJ + MTL + map writer, the map reader, the mapping of results back to
+//! the original triangles, and the input's material files (copied to the output).
 
 use super::*;
 use crate::error::{Error, Result};
@@ -213,4 +213,53 @@ pub fn map_back(
             }
         })
         .collect())
+}
+
+/// The material files `obj_path` names (`mtllib`, resolved as [`crate::scene::load_obj`]
+/// resolves them) that exist, in order.
+///
+/// Errors: [`Error::Io`] when `obj_path` cannot be read as text.
+pub fn material_files(obj_path: &Path) -> Result<Vec<PathBuf>> {
+    let text = std::fs::read_to_string(obj_path).map_err(|e| Error::io(obj_path, e))?;
+    let dir = obj_path.parent().unwrap_or(Path::new("."));
+    let mut files = Vec::new();
+    for line in text.lines() {
+        let line = line.split('#').next().unwrap_or("").trim();
+        let Some(rest) = line.strip_prefix("mtllib") else {
+            continue;
+        };
+        if !rest.starts_with(char::is_whitespace) {
+            continue;
+        }
+        let name = rest.trim();
+        let names: Vec<&str> = if dir.join(name).is_file() || !name.contains(char::is_whitespace) {
+            vec![name]
+        } else {
+            name.split_whitespace().collect()
+        };
+        files.extend(
+            names
+                .into_iter()
+                .map(|n| dir.join(n))
+                .filter(|p| p.is_file()),
+        );
+    }
+    Ok(files)
+}
+
+/// The text of the material files `obj_path` names ([`material_files`]), concatenated in
+/// order; files that cannot be read are left out (the loader warns about them).
+///
+/// Errors: [`Error::Io`] when `obj_path` cannot be read as text.
+pub fn material_text(obj_path: &Path) -> Result<String> {
+    let mut out = String::new();
+    for path in material_files(obj_path)? {
+        if let Ok(mtl) = std::fs::read_to_string(&path) {
+            out.push_str(mtl.strip_prefix('\u{feff}').unwrap_or(&mtl));
+            if !out.ends_with('\n') {
+                out.push('\n');
+            }
+        }
+    }
+    Ok(out)
 }

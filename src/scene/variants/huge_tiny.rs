@@ -243,133 +243,20 @@ pub(super) fn huge_tiny(scene: &Scene, tiny: usize) -> Result<(Out, String)> {
     let normals: Vec<DVec3> = (0..n).map(|t| unit_normal(&scene.corners(t))).collect();
     let live: Vec<bool> = (0..n).map(|t| !scene.is_degenerate(t)).collect();
 
-    // Flat regions: edge neighbours in the same plane, same material, opposite edge directions.
-    let edges = Edges::of(scene, true);
-    let mut sets = UnionFind::new(n);
-    for k in &edges.order {
-        let sides = &edges.on[k];
-        if sides.len() != 2 {
-            continue;
-        }
-        let ((t1, e1), (t2, e2)) = (sides[0], sides[1]);
-        let (c1, c2) = (scene.corners(t1), scene.corners(t2));
-        let opposite = key(c1[e1]) == key(c2[(e2 + 1) % 3]);
-        let far = c2[(e2 + 2) % 3];
-        if opposite
-            && same_material(scene, t1, t2)
-            && normals[t1].dot(normals[t2]) >= 1.0 - 1e-8
-            && (far - c1[0]).dot(normals[t1]).abs() <= tol
-        {
-            sets.union(t1, t2);
-        }
-    }
-    let mut regions = sets.groups((0..n).filter(|&t| live[t]));
-    let region_area = |r: &Vec<usize>| r.iter().map(|&t| scene.area(t)).sum::<f64>();
-    // Reflecting regions first (the huge triangle should receive light), then by area.
-    let emits = |r: &Vec<usize>| scene.is_emitter(r[0]);
-    regions.sort_by(|a, b| {
-        emits(a)
-            .cmp(&emits(b))
-            .then(region_area(b).total_cmp(&region_area(a)))
-    });
-
-    let mut chosen = None;
-    for region in regions.iter().take(50) {
-        let area = region_area(region);
-        let normal = region
-            .iter()
-            .map(|&t| normals[t] * scene.area(t))
-            .sum::<DVec3>()
-            .normalize_or_zero();
-        let origin = scene.corners(region[0])[0];
-        let flat_enough = region.iter().all(|&t| {
-            scene
-                .corners(t)
-                .iter()
-                .all(|p| (*p - origin).dot(normal).abs() <= tol)
-        });
-        if normal == DVec3::ZERO || !flat_enough {
-            continue;
-        }
-        let frame = PlaneFrame::new(origin, normal);
-        if let Some(merged) = merge_region(scene, region, &frame) {
-            chosen = Some((region.clone(), frame, normal, merged, area));
-            break;
-        }
-    }
-    let (region, frame, normal, merged, area) = match chosen {
-        Some(c) => c,
-        None => {
-            // Every large region has holes: the largest triangle is the huge one.
-            let t = (0..n)
-                .filter(|&t| live[t])
-                .max_by(|&a, &b| scene.area(a).total_cmp(&scene.area(b)))
-                .ok_or_else(|| Error::Parameter("variant: every triangle is degenerate".into()))?;
-            let c = scene.corners(t);
-            let frame = PlaneFrame::new(c[0], normals[t]);
-            let merged = Merged {
-                tris: vec![c],
-                flat: vec![c.map(|p| frame.flat(p))],
-            };
-            (vec![t], frame, normals[t], merged, scene.area(t))
-        }
-    };
+    let regions = flat_regions(scene, &normals, &live, tol);
+    let huge = choose_region(scene, &regions, &normals, &live, tol)?;
     let in_region: Vec<bool> = {
         let mut v = vec![false; n];
-        for &t in &region {
+        for &t in &huge.region {
             v[t] = true;
         }
         v
     };
-
-    // Objects: the other triangles connected through shared vertices.
-    let mut by_vertex: HashMap<[u64; 3], usize> = HashMap::new();
-    let mut objects = UnionFind::new(n);
-    for t in (0..n).filter(|&t| live[t] && !in_region[t]) {
-        for p in scene.corners(t) {
-            let first = *by_vertex.entry(key(p)).or_insert(t);
-            objects.union(first, t);
-        }
-    }
-    let objects = objects.groups((0..n).filter(|&t| live[t] && !in_region[t]));
-    // Objects at most half the region's size, if there are any (else all): the nearest to the
-    // region's plane (touching counts as 0), then the smallest by area.
-    let extent = |tris: &[usize]| {
-        let mut lo = DVec3::splat(f64::INFINITY);
-        let mut hi = DVec3::splat(f64::NEG_INFINITY);
-        for p in tris.iter().flat_map(|&t| scene.corners(t)) {
-            lo = lo.min(p);
-            hi = hi.max(p);
-        }
-        (hi - lo).length()
-    };
-    let region_extent = extent(&region);
-    let small: Vec<&Vec<usize>> = objects
-        .iter()
-        .filter(|o| extent(o) <= 0.5 * region_extent)
-        .collect();
-    let candidates = if small.is_empty() {
-        objects.iter().collect()
-    } else {
-        small
-    };
-    let rank = |o: &Vec<usize>| {
-        let d = o
-            .iter()
-            .flat_map(|&t| scene.corners(t))
-            .map(|p| (p - frame.origin).dot(normal).abs())
-            .fold(f64::INFINITY, f64::min);
-        let d = if d <= tol { 0.0 } else { d };
-        (d, o.iter().map(|&t| scene.area(t)).sum::<f64>())
-    };
-    let nearest = candidates.into_iter().min_by(|a, b| {
-        let (ra, rb) = (rank(a), rank(b));
-        ra.0.total_cmp(&rb.0).then(ra.1.total_cmp(&rb.1))
-    });
+    let nearest = nearest_object(scene, &live, &in_region, &huge, tol);
     let (object, k) = match nearest {
         Some(o) => {
             let k = ((tiny as f64 / o.len() as f64).sqrt().ceil() as usize).max(2);
-            (o.clone(), k)
+            (o, k)
         }
         None => (Vec::new(), 1),
     };
@@ -382,35 +269,7 @@ pub(super) fn huge_tiny(scene: &Scene, tiny: usize) -> Result<(Out, String)> {
         let zero = vec![[0.0; 3]; object.len()];
         crate::scene::generated::subdivide(&Scene::from_triangles(&corners, &zero, &zero), k)
     };
-
-    // Which original triangles each merged triangle covers (2D overlaps in the plane, scaled
-    // so that each original's rows sum to its own area).
-    let mut rows: Vec<Vec<(usize, f64)>> = vec![Vec::new(); merged.tris.len()];
-    for &t in &region {
-        let flat = scene.corners(t).map(|p| frame.flat(p));
-        let (fmin, fmax) = (
-            flat[0].min(flat[1]).min(flat[2]),
-            flat[0].max(flat[1]).max(flat[2]),
-        );
-        let mut overlaps: Vec<(usize, f64)> = Vec::new();
-        for (m, tri) in merged.flat.iter().enumerate() {
-            let (tmin, tmax) = (
-                tri[0].min(tri[1]).min(tri[2]),
-                tri[0].max(tri[1]).max(tri[2]),
-            );
-            if tmin.x > fmax.x || tmin.y > fmax.y || tmax.x < fmin.x || tmax.y < fmin.y {
-                continue;
-            }
-            let a = overlap_area(&flat, tri);
-            if a > 1e-12 * flat_area(&flat).abs() {
-                overlaps.push((m, a));
-            }
-        }
-        let total: f64 = overlaps.iter().map(|o| o.1).sum();
-        for (m, a) in overlaps {
-            rows[m].push((t, a * scene.area(t) / total));
-        }
-    }
+    let rows = merged_rows(scene, &huge);
 
     let mut out = Out::default();
     let mut region_done = false;
@@ -418,7 +277,7 @@ pub(super) fn huge_tiny(scene: &Scene, tiny: usize) -> Result<(Out, String)> {
         if in_region {
             if !region_done {
                 region_done = true;
-                for (m, tri) in merged.tris.iter().enumerate() {
+                for (m, tri) in huge.merged.tris.iter().enumerate() {
                     let v = out.tris.len() as u32;
                     let source = rows[m].first().map(|r| r.0).unwrap_or(t);
                     out.tris.push(*tri);
@@ -443,14 +302,202 @@ pub(super) fn huge_tiny(scene: &Scene, tiny: usize) -> Result<(Out, String)> {
     }
     let note = format!(
         "huge-tiny: a flat region of {} triangles (area {}) as {} triangles, an object of {} triangles as {} (k = {k})",
-        region.len(),
-        area,
-        merged.tris.len(),
+        huge.region.len(),
+        huge.area,
+        huge.merged.tris.len(),
         object.len(),
         object.len() * k * k
     );
     Ok((out, note))
 }
 
-// ---------------------------------------------------------------------------------------------
-// Files
+/// The flat regions of a scene: edge neighbours in the same plane (within `tol`), of the same
+/// material, with opposite edge directions; reflecting regions first (the huge triangle should
+/// receive light), then by area, largest first.
+fn flat_regions(scene: &Scene, normals: &[DVec3], live: &[bool], tol: f64) -> Vec<Vec<usize>> {
+    let n = scene.len();
+    let edges = Edges::of(scene, true);
+    let mut sets = UnionFind::new(n);
+    for k in &edges.order {
+        let sides = &edges.on[k];
+        if sides.len() != 2 {
+            continue;
+        }
+        let ((t1, e1), (t2, e2)) = (sides[0], sides[1]);
+        let (c1, c2) = (scene.corners(t1), scene.corners(t2));
+        let opposite = key(c1[e1]) == key(c2[(e2 + 1) % 3]);
+        let far = c2[(e2 + 2) % 3];
+        if opposite
+            && same_material(scene, t1, t2)
+            && normals[t1].dot(normals[t2]) >= 1.0 - 1e-8
+            && (far - c1[0]).dot(normals[t1]).abs() <= tol
+        {
+            sets.union(t1, t2);
+        }
+    }
+    let mut regions = sets.groups((0..n).filter(|&t| live[t]));
+    let region_area = |r: &Vec<usize>| r.iter().map(|&t| scene.area(t)).sum::<f64>();
+    let emits = |r: &Vec<usize>| scene.is_emitter(r[0]);
+    regions.sort_by(|a, b| {
+        emits(a)
+            .cmp(&emits(b))
+            .then(region_area(b).total_cmp(&region_area(a)))
+    });
+    regions
+}
+
+/// The flat region that becomes huge triangles: its triangles, plane, merged triangulation
+/// and area.
+struct HugeRegion {
+    region: Vec<usize>,
+    frame: PlaneFrame,
+    normal: DVec3,
+    merged: Merged,
+    area: f64,
+}
+
+/// The first of the 50 first `regions` that is flat within `tol` and merges into a simple
+/// polygon; when none does (every large region has holes), the largest triangle by itself.
+fn choose_region(
+    scene: &Scene,
+    regions: &[Vec<usize>],
+    normals: &[DVec3],
+    live: &[bool],
+    tol: f64,
+) -> Result<HugeRegion> {
+    for region in regions.iter().take(50) {
+        let area = region.iter().map(|&t| scene.area(t)).sum::<f64>();
+        let normal = region
+            .iter()
+            .map(|&t| normals[t] * scene.area(t))
+            .sum::<DVec3>()
+            .normalize_or_zero();
+        let origin = scene.corners(region[0])[0];
+        let flat_enough = region.iter().all(|&t| {
+            scene
+                .corners(t)
+                .iter()
+                .all(|p| (*p - origin).dot(normal).abs() <= tol)
+        });
+        if normal == DVec3::ZERO || !flat_enough {
+            continue;
+        }
+        let frame = PlaneFrame::new(origin, normal);
+        if let Some(merged) = merge_region(scene, region, &frame) {
+            return Ok(HugeRegion {
+                region: region.clone(),
+                frame,
+                normal,
+                merged,
+                area,
+            });
+        }
+    }
+    let t = (0..scene.len())
+        .filter(|&t| live[t])
+        .max_by(|&a, &b| scene.area(a).total_cmp(&scene.area(b)))
+        .ok_or_else(|| Error::Parameter("variant: every triangle is degenerate".into()))?;
+    let c = scene.corners(t);
+    let frame = PlaneFrame::new(c[0], normals[t]);
+    let merged = Merged {
+        tris: vec![c],
+        flat: vec![c.map(|p| frame.flat(p))],
+    };
+    Ok(HugeRegion {
+        region: vec![t],
+        frame,
+        normal: normals[t],
+        merged,
+        area: scene.area(t),
+    })
+}
+
+/// The object to split into tiny triangles: of the objects (the triangles outside the region,
+/// connected through shared vertices) at most half the region's size, if there are any (else
+/// all), the nearest to the region's plane (touching, within `tol`, counts as 0), then the
+/// smallest by area.
+fn nearest_object(
+    scene: &Scene,
+    live: &[bool],
+    in_region: &[bool],
+    huge: &HugeRegion,
+    tol: f64,
+) -> Option<Vec<usize>> {
+    let n = scene.len();
+    let mut by_vertex: HashMap<[u64; 3], usize> = HashMap::new();
+    let mut objects = UnionFind::new(n);
+    for t in (0..n).filter(|&t| live[t] && !in_region[t]) {
+        for p in scene.corners(t) {
+            let first = *by_vertex.entry(key(p)).or_insert(t);
+            objects.union(first, t);
+        }
+    }
+    let objects = objects.groups((0..n).filter(|&t| live[t] && !in_region[t]));
+    let extent = |tris: &[usize]| {
+        let mut lo = DVec3::splat(f64::INFINITY);
+        let mut hi = DVec3::splat(f64::NEG_INFINITY);
+        for p in tris.iter().flat_map(|&t| scene.corners(t)) {
+            lo = lo.min(p);
+            hi = hi.max(p);
+        }
+        (hi - lo).length()
+    };
+    let region_extent = extent(&huge.region);
+    let small: Vec<&Vec<usize>> = objects
+        .iter()
+        .filter(|o| extent(o) <= 0.5 * region_extent)
+        .collect();
+    let candidates = if small.is_empty() {
+        objects.iter().collect()
+    } else {
+        small
+    };
+    let rank = |o: &Vec<usize>| {
+        let d = o
+            .iter()
+            .flat_map(|&t| scene.corners(t))
+            .map(|p| (p - huge.frame.origin).dot(huge.normal).abs())
+            .fold(f64::INFINITY, f64::min);
+        let d = if d <= tol { 0.0 } else { d };
+        (d, o.iter().map(|&t| scene.area(t)).sum::<f64>())
+    };
+    candidates
+        .into_iter()
+        .min_by(|a, b| {
+            let (ra, rb) = (rank(a), rank(b));
+            ra.0.total_cmp(&rb.0).then(ra.1.total_cmp(&rb.1))
+        })
+        .cloned()
+}
+
+/// Per merged triangle, which original triangles of the region it covers and how much: the
+/// 2D overlaps in the plane, scaled so that each original's rows sum to its own area.
+fn merged_rows(scene: &Scene, huge: &HugeRegion) -> Vec<Vec<(usize, f64)>> {
+    let mut rows: Vec<Vec<(usize, f64)>> = vec![Vec::new(); huge.merged.tris.len()];
+    for &t in &huge.region {
+        let flat = scene.corners(t).map(|p| huge.frame.flat(p));
+        let (fmin, fmax) = (
+            flat[0].min(flat[1]).min(flat[2]),
+            flat[0].max(flat[1]).max(flat[2]),
+        );
+        let mut overlaps: Vec<(usize, f64)> = Vec::new();
+        for (m, tri) in huge.merged.flat.iter().enumerate() {
+            let (tmin, tmax) = (
+                tri[0].min(tri[1]).min(tri[2]),
+                tri[0].max(tri[1]).max(tri[2]),
+            );
+            if tmin.x > fmax.x || tmin.y > fmax.y || tmax.x < fmin.x || tmax.y < fmin.y {
+                continue;
+            }
+            let a = overlap_area(&flat, tri);
+            if a > 1e-12 * flat_area(&flat).abs() {
+                overlaps.push((m, a));
+            }
+        }
+        let total: f64 = overlaps.iter().map(|o| o.1).sum();
+        for (m, a) in overlaps {
+            rows[m].push((t, a * scene.area(t) / total));
+        }
+    }
+    rows
+}

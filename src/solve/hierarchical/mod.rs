@@ -12,7 +12,6 @@
 
 mod groups;
 mod live_bins;
-pub mod model;
 mod pair_cache;
 mod sweep;
 
@@ -39,11 +38,11 @@ use crate::solve::budget::{
 };
 use crate::solve::convergence::{damp_if_damped, end_sweep, start_damping};
 use crate::solve::health::{self, Guard};
+use crate::solve::model::{self, ModelStats};
 pub use crate::solve::solution::HierarchyTimings;
 use crate::solve::solution::{Solution, SolveStats};
 use crate::solve::{change_ratio, finish, Convergence, SolverOptions};
 use crate::transport::gather_entries;
-use model::ModelStats;
 
 /// A scene prepared for hierarchical solving: tree, links and element arrays. Build it once and
 /// solve it as many times as needed (different emission: see [`Prepared::solve_with_emission`]).
@@ -505,7 +504,7 @@ impl Prepared {
     /// scene (same element count and stored bins), else starts from the source.
     ///
     /// Solves one channel when the albedos and the source are grey, three otherwise
-    /// ([`crate::solve::hierarchical::model`]); the returned solution is RGB either way.
+    /// ([`crate::solve::model`]); the returned solution is RGB either way.
     ///
     /// # Panics
     /// When `elem_source.len() != self.element_count()`.

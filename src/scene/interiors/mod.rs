@@ -23,12 +23,14 @@
 //! [`cos_sin_turn`], a fixed polynomial).
 
 use std::ops::RangeInclusive;
-use std::path::PathBuf;
 
 use glam::DVec3;
 
-use crate::geometry::sampling::Rng;
 use crate::scene::Scene;
+
+mod cad;
+
+use cad::{Cad, Material};
 
 /// Share of the non-emitting polygons written with reversed winding (each polygon reversed
 /// with this probability, drawn from the seed).
@@ -105,207 +107,6 @@ fn v(x: f64, y: f64, z: f64) -> DVec3 {
     DVec3::new(x, y, z)
 }
 
-/// A material: name, albedo (`Kd`), emitted radiance (`Ke`).
-type Material = (&'static str, [f64; 3], [f64; 3]);
-
-/// Collects polygons, triangulates them as an exporter does and builds the scene.
-struct Cad {
-    tris: Vec<[DVec3; 3]>,
-    material: Vec<u32>,
-    reversed: Vec<bool>,
-    materials: Vec<Material>,
-    rng: Rng,
-    polygons: usize,
-    reversed_polygons: usize,
-}
-
-impl Cad {
-    fn new(seed: u64) -> Cad {
-        Cad {
-            tris: Vec::new(),
-            material: Vec::new(),
-            reversed: Vec::new(),
-            materials: Vec::new(),
-            rng: Rng::new(seed, 0x1_a7e0_fcad),
-            polygons: 0,
-            reversed_polygons: 0,
-        }
-    }
-
-    /// The index of material `m`, added on first use.
-    fn mat(&mut self, m: Material) -> u32 {
-        match self.materials.iter().position(|x| x.0 == m.0) {
-            Some(i) => i as u32,
-            None => {
-                self.materials.push(m);
-                (self.materials.len() - 1) as u32
-            }
-        }
-    }
-
-    /// Adds a planar polygon (vertices in order around it) whose surface faces `facing`,
-    /// fan-triangulated from its first vertex. The vertex order is reversed (the first vertex
-    /// kept) so that the front faces `facing`, and then once more for a share
-    /// [`REVERSED_SHARE`] of the non-emitting polygons. The fan must be valid: every other
-    /// vertex visible from the first, none on an edge next to it.
-    fn polygon(&mut self, pts: &[DVec3], facing: DVec3, m: Material) {
-        let m = self.mat(m);
-        let mut p: Vec<DVec3> = pts.to_vec();
-        let mut n = DVec3::ZERO;
-        for i in 1..p.len() - 1 {
-            n += (p[i] - p[0]).cross(p[i + 1] - p[0]);
-        }
-        if n.dot(facing) < 0.0 {
-            p[1..].reverse();
-        }
-        let emits = self.materials[m as usize].2.iter().any(|&e| e > 0.0);
-        let draw = self.rng.next_f64();
-        let reverse = !emits && draw < REVERSED_SHARE;
-        if reverse {
-            p[1..].reverse();
-            self.reversed_polygons += 1;
-        }
-        self.polygons += 1;
-        for i in 1..p.len() - 1 {
-            self.tris.push([p[0], p[i], p[i + 1]]);
-            self.material.push(m);
-            self.reversed.push(reverse);
-        }
-    }
-
-    /// An axis-aligned box from `lo` to `hi`, six faces facing outward.
-    fn block(&mut self, lo: DVec3, hi: DVec3, m: Material) {
-        let c = (lo + hi) * 0.5;
-        let h = (hi - lo) * 0.5;
-        self.slab(c, [v(h.x, 0.0, 0.0), v(0.0, h.y, 0.0), v(0.0, 0.0, h.z)], m);
-    }
-
-    /// A box centred at `c` with half-extent vectors `a` (three orthogonal), faces outward.
-    fn slab(&mut self, c: DVec3, a: [DVec3; 3], m: Material) {
-        for axis in 0..3 {
-            let (d, e, f) = (a[axis], a[(axis + 1) % 3], a[(axis + 2) % 3]);
-            for sign in [1.0, -1.0] {
-                let centre = c + d * sign;
-                self.polygon(
-                    &[
-                        centre - e - f,
-                        centre + e - f,
-                        centre + e + f,
-                        centre - e + f,
-                    ],
-                    d * sign,
-                    m,
-                );
-            }
-        }
-    }
-
-    /// A cylinder along coordinate axis `axis` (0, 1, 2) from `base` for `length`, of `sides`
-    /// side quads facing outward, with end caps (n-gons, fanned) when `caps`.
-    #[allow(clippy::too_many_arguments)]
-    fn cylinder(
-        &mut self,
-        axis: usize,
-        base: DVec3,
-        length: f64,
-        radius: f64,
-        sides: usize,
-        caps: bool,
-        m: Material,
-    ) {
-        let mut e = [DVec3::ZERO; 3];
-        for (k, e) in e.iter_mut().enumerate() {
-            e[(axis + k) % 3] = 1.0;
-        }
-        let (along, e1, e2) = (e[0], e[1], e[2]);
-        let ring: Vec<DVec3> = (0..sides)
-            .map(|i| {
-                let (c, s) = cos_sin_turn(i, sides);
-                (e1 * c + e2 * s) * radius
-            })
-            .collect();
-        let top = base + along * length;
-        for i in 0..sides {
-            let (a, b) = (ring[i], ring[(i + 1) % sides]);
-            self.polygon(&[base + a, base + b, top + b, top + a], a + b, m);
-        }
-        if caps {
-            let bottom: Vec<DVec3> = ring.iter().map(|&r| base + r).collect();
-            let upper: Vec<DVec3> = ring.iter().map(|&r| top + r).collect();
-            self.polygon(&bottom, -along, m);
-            self.polygon(&upper, along, m);
-        }
-    }
-
-    /// The open side of a cylinder facing inward (its inside), for lamp shades.
-    fn cylinder_inside(
-        &mut self,
-        base: DVec3,
-        length: f64,
-        radius: f64,
-        sides: usize,
-        m: Material,
-    ) {
-        let top = base + v(0.0, length, 0.0);
-        for i in 0..sides {
-            let (c0, s0) = cos_sin_turn(i, sides);
-            let (c1, s1) = cos_sin_turn(i + 1, sides);
-            let (a, b) = (v(s0, 0.0, c0) * radius, v(s1, 0.0, c1) * radius);
-            self.polygon(&[base + a, base + b, top + b, top + a], -(a + b), m);
-        }
-    }
-
-    /// A wall, floor or ceiling rectangle as one polygon: corners `a`, `b`, `c`, `d` in order
-    /// around it, with `extra` more vertices spread over each of the two edges away from `a`
-    /// (`b`-`c` and `c`-`d`, at uneven spacing), so its fan from `a` is a spray of slivers.
-    fn big_rectangle(
-        &mut self,
-        [a, b, c, d]: [DVec3; 4],
-        extra: usize,
-        facing: DVec3,
-        m: Material,
-    ) {
-        let mut pts = vec![a, b];
-        let spread = |i: usize| {
-            // Uneven but fixed: the squares of i / (extra + 1), pulled towards even spacing.
-            let t = i as f64 / (extra + 1) as f64;
-            0.5 * (t + t * t)
-        };
-        for i in 1..=extra {
-            pts.push(b + (c - b) * spread(i));
-        }
-        pts.push(c);
-        for i in 1..=extra {
-            pts.push(c + (d - c) * spread(i));
-        }
-        pts.push(d);
-        self.polygon(&pts, facing, m);
-    }
-
-    fn build(self) -> Interior {
-        let mut scene = Scene {
-            material_names: self.materials.iter().map(|m| m.0.to_string()).collect(),
-            path: PathBuf::new(),
-            ..Scene::default()
-        };
-        for (t, tri) in self.tris.iter().enumerate() {
-            let base = scene.positions.len() as u32;
-            scene.positions.extend_from_slice(tri);
-            scene.triangles.push([base, base + 1, base + 2]);
-            let (_, kd, ke) = self.materials[self.material[t] as usize];
-            scene.albedo.push(kd);
-            scene.emission.push(ke);
-            scene.material.push(Some(self.material[t]));
-        }
-        Interior {
-            scene,
-            polygons: self.polygons,
-            reversed_polygons: self.reversed_polygons,
-            reversed: self.reversed,
-        }
-    }
-}
-
 const FLOOR: Material = ("floor", [0.35, 0.33, 0.3], [0.0; 3]);
 const WALL: Material = ("wall", [0.7, 0.68, 0.62], [0.0; 3]);
 const CEILING: Material = ("ceiling", [0.8, 0.8, 0.78], [0.0; 3]);
@@ -379,6 +180,80 @@ fn wall_with_openings(
     );
 }
 
+/// The shell of a `w x h x d` room from the origin (floor y = 0, window wall z = 0): what
+/// [`Cad::big_rectangle`] makes of the floor, the ceiling (one polygon per x range of
+/// `ceiling`), the window wall ([`wall_with_openings`]), the back wall and the two side walls,
+/// in that order, with `extra` edge vertices on each (floor, ceiling, walls).
+struct Shell<'a> {
+    size: (f64, f64, f64),
+    extra: (usize, usize, usize),
+    ceiling: &'a [(f64, f64)],
+    /// The window wall's openings (x ranges) from y = sill to head, closed by panes of
+    /// `pane` when given.
+    window: ((f64, f64), &'a [(f64, f64)], Option<Material>),
+}
+
+impl Shell<'_> {
+    fn add(&self, cad: &mut Cad) {
+        let (w, h, d) = self.size;
+        let (floor_extra, ceiling_extra, wall_extra) = self.extra;
+        let up = v(0.0, 1.0, 0.0);
+        cad.big_rectangle(
+            [
+                v(0.0, 0.0, 0.0),
+                v(w, 0.0, 0.0),
+                v(w, 0.0, d),
+                v(0.0, 0.0, d),
+            ],
+            floor_extra,
+            up,
+            FLOOR,
+        );
+        for &(x0, x1) in self.ceiling {
+            cad.big_rectangle(
+                [v(x0, h, 0.0), v(x1, h, 0.0), v(x1, h, d), v(x0, h, d)],
+                ceiling_extra,
+                -up,
+                CEILING,
+            );
+        }
+        let (sill_head, openings, pane) = self.window;
+        wall_with_openings(
+            cad,
+            0.0,
+            (w, h),
+            sill_head,
+            openings,
+            v(0.0, 0.0, 1.0),
+            WALL,
+            pane,
+        );
+        cad.big_rectangle(
+            [v(0.0, 0.0, d), v(w, 0.0, d), v(w, h, d), v(0.0, h, d)],
+            wall_extra,
+            v(0.0, 0.0, -1.0),
+            WALL,
+        );
+        cad.big_rectangle(
+            [
+                v(0.0, 0.0, 0.0),
+                v(0.0, 0.0, d),
+                v(0.0, h, d),
+                v(0.0, h, 0.0),
+            ],
+            wall_extra,
+            v(1.0, 0.0, 0.0),
+            WALL,
+        );
+        cad.big_rectangle(
+            [v(w, 0.0, d), v(w, 0.0, 0.0), v(w, h, 0.0), v(w, h, d)],
+            wall_extra,
+            v(-1.0, 0.0, 0.0),
+            WALL,
+        );
+    }
+}
+
 /// Four thin vertical cylinders from y = 0 to `height` at the corners of the rectangle
 /// `[x0, x1] x [z0, z1]` (legs).
 #[allow(clippy::too_many_arguments)]
@@ -401,29 +276,9 @@ fn legs(
 pub fn classroom(seed: u64) -> Interior {
     let mut cad = Cad::new(seed);
     let (w, h, d) = (9.0, 3.0, 7.0);
-    let up = v(0.0, 1.0, 0.0);
 
-    // Room shell: the floor, the ceiling in two halves, four walls.
-    cad.big_rectangle(
-        [
-            v(0.0, 0.0, 0.0),
-            v(w, 0.0, 0.0),
-            v(w, 0.0, d),
-            v(0.0, 0.0, d),
-        ],
-        14,
-        up,
-        FLOOR,
-    );
-    for (x0, x1) in [(0.0, 4.5), (4.5, w)] {
-        cad.big_rectangle(
-            [v(x0, h, 0.0), v(x1, h, 0.0), v(x1, h, d), v(x0, h, d)],
-            9,
-            -up,
-            CEILING,
-        );
-    }
-    // Window wall (z = 0): four openings 1.6 m wide between 0.9 m and 2.5 m.
+    // Room shell: the floor, the ceiling in two halves, four walls; the window wall (z = 0)
+    // with four openings 1.6 m wide between 0.9 m and 2.5 m.
     let pier = (w - 4.0 * 1.6) / 5.0;
     let openings: Vec<(f64, f64)> = (0..4)
         .map(|i| {
@@ -431,40 +286,13 @@ pub fn classroom(seed: u64) -> Interior {
             (a, a + 1.6)
         })
         .collect();
-    wall_with_openings(
-        &mut cad,
-        0.0,
-        (w, h),
-        (0.9, 2.5),
-        &openings,
-        v(0.0, 0.0, 1.0),
-        WALL,
-        Some(SKY),
-    );
-    // Back wall (z = d), side walls.
-    cad.big_rectangle(
-        [v(0.0, 0.0, d), v(w, 0.0, d), v(w, h, d), v(0.0, h, d)],
-        8,
-        v(0.0, 0.0, -1.0),
-        WALL,
-    );
-    cad.big_rectangle(
-        [
-            v(0.0, 0.0, 0.0),
-            v(0.0, 0.0, d),
-            v(0.0, h, d),
-            v(0.0, h, 0.0),
-        ],
-        8,
-        v(1.0, 0.0, 0.0),
-        WALL,
-    );
-    cad.big_rectangle(
-        [v(w, 0.0, d), v(w, 0.0, 0.0), v(w, h, 0.0), v(w, h, d)],
-        8,
-        v(-1.0, 0.0, 0.0),
-        WALL,
-    );
+    Shell {
+        size: (w, h, d),
+        extra: (14, 9, 8),
+        ceiling: &[(0.0, 4.5), (4.5, w)],
+        window: ((0.9, 2.5), &openings, Some(SKY)),
+    }
+    .add(&mut cad);
 
     // Blackboard on the back wall, a door against the far side wall.
     cad.block(v(2.0, 0.9, d - 0.03), v(6.0, 2.1, d), BLACKBOARD);
@@ -476,45 +304,11 @@ pub fn classroom(seed: u64) -> Interior {
     cad.block(v(8.04, 0.0, 6.05), v(8.08, 0.72, 6.7), WOOD);
     cad.block(v(6.56, 0.25, 6.66), v(8.04, 0.7, 6.69), WOOD);
 
-    // Desks (1.2 x 0.6 m tops on four thin legs) with chairs behind them, facing the board.
+    // Desks with chairs behind them, facing the board.
     for row in 0..6 {
         let z = 1.0 + 0.9 * row as f64;
         for x in [1.4, 3.45, 5.55, 7.6] {
-            cad.block(v(x - 0.6, 0.72, z - 0.3), v(x + 0.6, 0.75, z + 0.3), WOOD);
-            legs(
-                &mut cad,
-                (x - 0.55, x + 0.55),
-                (z - 0.25, z + 0.25),
-                0.72,
-                0.02,
-                10,
-                METAL,
-            );
-            // Chair, pulled out by 0-10 cm.
-            let pull = 0.1 * cad.rng.next_f64();
-            let (cx, cz) = (x, z - 0.5 - pull);
-            cad.block(
-                v(cx - 0.21, 0.43, cz - 0.21),
-                v(cx + 0.21, 0.46, cz + 0.21),
-                CHAIR,
-            );
-            cad.block(
-                v(cx - 0.21, 0.52, cz - 0.22),
-                v(cx + 0.21, 0.85, cz - 0.2),
-                CHAIR,
-            );
-            legs(
-                &mut cad,
-                (cx - 0.18, cx + 0.18),
-                (cz - 0.18, cz + 0.18),
-                0.43,
-                0.012,
-                8,
-                METAL,
-            );
-            for px in [cx - 0.18, cx + 0.18] {
-                cad.cylinder(1, v(px, 0.46, cz - 0.18), 0.39, 0.012, 8, true, METAL);
-            }
+            desk_and_chair(&mut cad, x, z);
         }
     }
 
@@ -532,6 +326,45 @@ pub fn classroom(seed: u64) -> Interior {
     cad.build()
 }
 
+/// A classroom desk centred at (`x`, `z`) (a 1.2 x 0.6 m top on four thin legs) and its chair
+/// behind it, pulled out by 0-10 cm.
+fn desk_and_chair(cad: &mut Cad, x: f64, z: f64) {
+    cad.block(v(x - 0.6, 0.72, z - 0.3), v(x + 0.6, 0.75, z + 0.3), WOOD);
+    legs(
+        cad,
+        (x - 0.55, x + 0.55),
+        (z - 0.25, z + 0.25),
+        0.72,
+        0.02,
+        10,
+        METAL,
+    );
+    let pull = 0.1 * cad.rng.next_f64();
+    let (cx, cz) = (x, z - 0.5 - pull);
+    cad.block(
+        v(cx - 0.21, 0.43, cz - 0.21),
+        v(cx + 0.21, 0.46, cz + 0.21),
+        CHAIR,
+    );
+    cad.block(
+        v(cx - 0.21, 0.52, cz - 0.22),
+        v(cx + 0.21, 0.85, cz - 0.2),
+        CHAIR,
+    );
+    legs(
+        cad,
+        (cx - 0.18, cx + 0.18),
+        (cz - 0.18, cz + 0.18),
+        0.43,
+        0.012,
+        8,
+        METAL,
+    );
+    for px in [cx - 0.18, cx + 0.18] {
+        cad.cylinder(1, v(px, 0.46, cz - 0.18), 0.39, 0.012, 8, true, METAL);
+    }
+}
+
 const SLAT: Material = ("slat", [0.75, 0.75, 0.72], [0.0; 3]);
 const CORD: Material = ("cord", [0.6, 0.6, 0.58], [0.0; 3]);
 const SHADE: Material = ("shade", [0.6, 0.55, 0.45], [0.0; 3]);
@@ -547,66 +380,38 @@ const BOOKS: [Material; 3] = [
     ("book_cream", [0.7, 0.65, 0.5], [0.0; 3]),
 ];
 
+/// The office's window: from x = 0.9 to 3.1 m, y = 0.85 to 2.35 m, in the wall z = 0.
+const OFFICE_WINDOW: (f64, f64, f64, f64) = (0.9, 3.1, 0.85, 2.35);
+
 /// The office (see the module documentation), with polygon reversals and book widths drawn
 /// from `seed`. Its triangle count is within [`OFFICE_TRIANGLES`].
 pub fn office(seed: u64) -> Interior {
     let mut cad = Cad::new(seed);
     let (w, h, d) = (4.0, 2.8, 5.0);
-    let up = v(0.0, 1.0, 0.0);
-    let (wx0, wx1, sill, head) = (0.9, 3.1, 0.85, 2.35);
+    let (wx0, wx1, sill, head) = OFFICE_WINDOW;
 
     // Room shell: large polygons.
-    cad.big_rectangle(
-        [
-            v(0.0, 0.0, 0.0),
-            v(w, 0.0, 0.0),
-            v(w, 0.0, d),
-            v(0.0, 0.0, d),
-        ],
-        10,
-        up,
-        FLOOR,
-    );
-    cad.big_rectangle(
-        [v(0.0, h, 0.0), v(w, h, 0.0), v(w, h, d), v(0.0, h, d)],
-        10,
-        -up,
-        CEILING,
-    );
-    wall_with_openings(
-        &mut cad,
-        0.0,
-        (w, h),
-        (sill, head),
-        &[(wx0, wx1)],
-        v(0.0, 0.0, 1.0),
-        WALL,
-        None,
-    );
-    cad.big_rectangle(
-        [v(0.0, 0.0, d), v(w, 0.0, d), v(w, h, d), v(0.0, h, d)],
-        6,
-        v(0.0, 0.0, -1.0),
-        WALL,
-    );
-    cad.big_rectangle(
-        [
-            v(0.0, 0.0, 0.0),
-            v(0.0, 0.0, d),
-            v(0.0, h, d),
-            v(0.0, h, 0.0),
-        ],
-        6,
-        v(1.0, 0.0, 0.0),
-        WALL,
-    );
-    cad.big_rectangle(
-        [v(w, 0.0, d), v(w, 0.0, 0.0), v(w, h, 0.0), v(w, h, d)],
-        6,
-        v(-1.0, 0.0, 0.0),
-        WALL,
-    );
-    // The window's reveal, 25 cm deep, and the sky pane closing it.
+    Shell {
+        size: (w, h, d),
+        extra: (10, 10, 6),
+        ceiling: &[(0.0, w)],
+        window: ((sill, head), &[(wx0, wx1)], None),
+    }
+    .add(&mut cad);
+    window_reveal(&mut cad);
+    blinds(&mut cad);
+    let top = 0.76;
+    office_desk(&mut cad, top);
+    desk_lamp(&mut cad, top);
+    office_chair(&mut cad);
+    bookshelf(&mut cad, w);
+    cad.build()
+}
+
+/// The office window's reveal, 25 cm deep, and the sky pane closing it.
+fn window_reveal(cad: &mut Cad) {
+    let (wx0, wx1, sill, head) = OFFICE_WINDOW;
+    let up = v(0.0, 1.0, 0.0);
     let back = -0.25;
     cad.polygon(
         &[
@@ -658,9 +463,13 @@ pub fn office(seed: u64) -> Interior {
         v(0.0, 0.0, 1.0),
         OFFICE_SKY,
     );
+}
 
-    // Venetian blinds in front of the window: 66 slats 2.3 m x 25 mm x 0.8 mm, 21 mm apart,
-    // tilted 40 degrees about their long axis, a head rail, a bottom rail, four ladder cords.
+/// Venetian blinds in front of the office window: 66 slats 2.3 m x 25 mm x 0.8 mm, 21 mm
+/// apart, tilted 40 degrees about their long axis, a head rail, a bottom rail, four ladder
+/// cords.
+fn blinds(cad: &mut Cad) {
+    let (wx0, wx1, _, head) = OFFICE_WINDOW;
     let (bx0, bx1, bz) = (wx0 - 0.05, wx1 + 0.05, 0.06);
     let (c, s) = cos_sin_degrees(40);
     let across = v(0.0, s, c) * 0.0125;
@@ -698,9 +507,12 @@ pub fn office(seed: u64) -> Interior {
             );
         }
     }
+}
 
-    // Desk facing the window: a top on two side panels, a modesty panel.
-    let (dx0, dx1, dz0, dz1, top) = (1.2, 2.8, 1.2, 2.0, 0.76);
+/// The office desk facing the window, its top at height `top` (a top on two side panels, a
+/// modesty panel), with a monitor (stand, screen), a keyboard and a mug on it.
+fn office_desk(cad: &mut Cad, top: f64) {
+    let (dx0, dx1, dz0, dz1) = (1.2, 2.8, 1.2, 2.0);
     cad.block(v(dx0, top - 0.04, dz0), v(dx1, top, dz1), WOOD);
     cad.block(
         v(dx0 + 0.02, 0.0, dz0 + 0.05),
@@ -717,7 +529,6 @@ pub fn office(seed: u64) -> Interior {
         v(dx1 - 0.05, top - 0.06, dz0 + 0.07),
         WOOD,
     );
-    // Monitor (stand, screen), keyboard, mug.
     cad.block(v(1.9, top, 1.3), v(2.1, top + 0.01, 1.45), PLASTIC);
     cad.block(
         v(1.98, top + 0.01, 1.36),
@@ -727,7 +538,12 @@ pub fn office(seed: u64) -> Interior {
     cad.block(v(1.72, top + 0.12, 1.33), v(2.28, top + 0.45, 1.36), SCREEN);
     cad.block(v(1.78, top, 1.55), v(2.22, top + 0.02, 1.7), PLASTIC);
     cad.cylinder(1, v(2.45, top, 1.75), 0.1, 0.04, 20, true, MUG);
-    // Desk lamp: a base, an arm, a shade (outside and inside) with an emissive bulb in it.
+}
+
+/// A desk lamp standing on the desk top at height `top`: a base, an arm, a shade (outside and
+/// inside) with an emissive bulb in it.
+fn desk_lamp(cad: &mut Cad, top: f64) {
+    let up = v(0.0, 1.0, 0.0);
     let (lx, lz) = (1.45, 1.45);
     cad.cylinder(1, v(lx, top, lz), 0.02, 0.07, 24, true, METAL);
     cad.cylinder(1, v(lx, top + 0.02, lz), 0.32, 0.008, 8, true, METAL);
@@ -744,7 +560,10 @@ pub fn office(seed: u64) -> Interior {
     let inner: Vec<DVec3> = ring.iter().map(|p| v(p.x, p.y - 0.001, p.z)).collect();
     cad.polygon(&inner, -up, SHADE);
     cad.cylinder(1, v(lx, shade + 0.04, lz), 0.05, 0.02, 12, true, BULB);
-    // Chair: a base disc, a column, a seat, a back.
+}
+
+/// The office chair, pulled out by 0-10 cm: a base disc, a column, a seat, a back.
+fn office_chair(cad: &mut Cad) {
     let (chx, chz) = (2.0, 2.45 + 0.1 * cad.rng.next_f64());
     cad.cylinder(1, v(chx, 0.02, chz), 0.03, 0.3, 24, true, PLASTIC);
     cad.cylinder(1, v(chx, 0.05, chz), 0.38, 0.025, 12, true, METAL);
@@ -758,8 +577,11 @@ pub fn office(seed: u64) -> Interior {
         v(chx + 0.22, 1.0, chz + 0.28),
         CHAIR,
     );
+}
 
-    // Bookshelf against the side wall x = w: two sides, a back, six boards, books.
+/// A bookshelf against the side wall x = `w`: two sides, a back, six boards, books of drawn
+/// widths and heights on the lower five.
+fn bookshelf(cad: &mut Cad, w: f64) {
     let (sx0, sx1, sz0, sz1, sh) = (w - 0.36, w - 0.01, 2.5, 4.0, 2.0);
     cad.block(v(sx0, 0.0, sz0), v(sx1, sh, sz0 + 0.02), SHELF);
     cad.block(v(sx0, 0.0, sz1 - 0.02), v(sx1, sh, sz1), SHELF);
@@ -792,5 +614,4 @@ pub fn office(seed: u64) -> Interior {
             b += 1;
         }
     }
-    cad.build()
 }
