@@ -21,6 +21,9 @@ pub(super) const GROUP_CELLS: usize = 4;
 pub(super) struct SenderGroups {
     /// Per node, its groups `range.0..range.1` (empty for small nodes).
     pub(super) range: Vec<(u32, u32)>,
+    /// Per node, its elements (a compact copy of `Node::elements` for the pull of small
+    /// nodes).
+    pub(super) elements: Vec<(u32, u32)>,
     /// Per group, the area-weighted mean normal (unit for exact groups, shorter for cells).
     pub(super) normal: Vec<DVec3>,
     /// Per group, its area.
@@ -53,6 +56,7 @@ impl SenderGroups {
     ) -> SenderGroups {
         let mut groups = SenderGroups {
             range: vec![(0, 0); tree.nodes.len()],
+            elements: tree.nodes.iter().map(|n| n.elements).collect(),
             elem_group: vec![NONE; elem_area.len()],
             ..SenderGroups::default()
         };
@@ -197,7 +201,7 @@ impl SenderGroups {
 
     /// Bytes of the per-sweep group sums.
     pub(super) fn bytes(&self, bins: u64) -> u64 {
-        self.normal.len() as u64 * (24 + 8 + 4 + 24 * (1 + bins))
+        self.normal.len() as u64 * (24 + 8 + 4 + 24 * (1 + bins)) + self.elements.len() as u64 * 8
     }
 
     /// Area-weighted sums of B (`group_b`) and of every antiradiance bin (`group_a`) per group:

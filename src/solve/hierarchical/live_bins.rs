@@ -73,7 +73,7 @@ impl LiveBins {
                 // The sweep's own per-pair factors (from the cache when there is one): a bin is
                 // written where the pair's antiradiance factor is not 0.
                 match &prepared.pairs {
-                    Some(cache) => cache.for_each_node(e, tree, links, |range, factors| {
+                    Some(cache) => cache.for_each_node(e, |range, factors| {
                         for (f, l) in factors.iter().zip(&links.cluster[range]) {
                             if f[1] != 0.0 {
                                 set(m, l.bin as usize);

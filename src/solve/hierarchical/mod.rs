@@ -658,7 +658,6 @@ impl Prepared {
             stats.extrapolations = 0;
         }
         let (mut x_flat, mut g_flat) = (Vec::new(), Vec::new());
-        let tree = &self.tree;
         let links = &self.links;
         let elem_area = &self.elem_area;
 
@@ -699,9 +698,9 @@ impl Prepared {
                 .zip(anti_out.into_par_iter())
                 .enumerate()
                 .map_init(
-                    || vec![[0.0f64; C]; nb],
+                    || vec![[0.0f64; C]; 2 * nb],
                     |a_acc, (e, (b_out, a_out))| {
-                        a_acc.fill([0.0; C]);
+                        a_acc[..nb].fill([0.0; C]);
                         let mut h = [0.0f64; C];
                         let mut row = 0.0;
                         for l in links.exact_start[e]..links.exact_start[e + 1] {
@@ -716,7 +715,7 @@ impl Prepared {
                                 use_anti,
                                 two_sided || elem_back[s],
                                 &mut h,
-                                a_acc,
+                                &mut a_acc[..nb],
                             );
                         }
                         let mut add = |l: &ClusterLink, i: &[f32; C], k: PairFactor| {
@@ -733,20 +732,51 @@ impl Prepared {
                         match pairs {
                             Some(cache) => {
                                 // A stream of multiply-adds: factors, intensities and bins
-                                // side by side (a factor of 0 adds nothing).
-                                cache.for_each_node(e, tree, links, |range, factors| {
-                                    for ((f, i), &bin) in factors
-                                        .iter()
-                                        .zip(&intensity[range.clone()])
-                                        .zip(&cache.link_bin[range])
-                                    {
-                                        let [irradiance, anti] = f.map(f64::from);
+                                // side by side (a factor of 0 adds nothing), alternate pairs
+                                // into two sets of sums so that consecutive adds into one bin
+                                // do not wait on each other.
+                                let (a_even, a_odd) = a_acc.split_at_mut(nb);
+                                let mut h_odd = [0.0f64; C];
+                                cache.for_each_node(e, |range, factors| {
+                                    let intensity = &intensity[range.clone()];
+                                    let bins = &cache.link_bin[range];
+                                    let pairs = factors.len() / 2;
+                                    for k in 0..pairs {
+                                        let (j0, j1) = (2 * k, 2 * k + 1);
+                                        let [f0, g0] = factors[j0].map(f64::from);
+                                        let [f1, g1] = factors[j1].map(f64::from);
+                                        let (i0, i1) = (
+                                            intensity[j0].map(f64::from),
+                                            intensity[j1].map(f64::from),
+                                        );
+                                        let (b0, b1) = (bins[j0] as usize, bins[j1] as usize);
                                         for c in 0..C {
-                                            h[c] += irradiance * i[c] as f64;
-                                            a_acc[bin as usize][c] += anti * i[c] as f64;
+                                            h[c] += f0 * i0[c];
+                                            h_odd[c] += f1 * i1[c];
+                                            a_even[b0][c] += g0 * i0[c];
+                                            a_odd[b1][c] += g1 * i1[c];
+                                        }
+                                    }
+                                    if factors.len() % 2 == 1 {
+                                        let j = factors.len() - 1;
+                                        let [f0, g0] = factors[j].map(f64::from);
+                                        let (i0, b0) =
+                                            (intensity[j].map(f64::from), bins[j] as usize);
+                                        for c in 0..C {
+                                            h[c] += f0 * i0[c];
+                                            a_even[b0][c] += g0 * i0[c];
                                         }
                                     }
                                 });
+                                for c in 0..C {
+                                    h[c] += h_odd[c];
+                                }
+                                for (even, odd) in a_even.iter_mut().zip(a_odd.iter_mut()) {
+                                    for c in 0..C {
+                                        even[c] += odd[c];
+                                    }
+                                    *odd = [0.0; C];
+                                }
                             }
                             None => ctx.for_each_pair(e, links, |i, l, k| add(l, &intensity[i], k)),
                         }

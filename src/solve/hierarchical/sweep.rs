@@ -154,7 +154,7 @@ impl SweepContext<'_> {
                 );
             }
         } else {
-            let (e0, e1) = self.tree.nodes[l.sender as usize].elements;
+            let (e0, e1) = groups.elements[l.sender as usize];
             for e in e0 as usize..e1 as usize {
                 let a = self.elem_area[e];
                 let a_e = self
