@@ -87,8 +87,9 @@ pub struct Prepared {
 }
 
 /// The solver's state over the elements after a solve: radiance per element and antiradiance per
-/// element and bin. Pass it back to [`Prepared::solve_with_source`] to warm-start the next solve
-/// of the same [`Prepared`] scene (interactive relighting).
+/// element and bin, the source it was solved for and where its iteration stood. Pass it back to
+/// [`Prepared::solve_with_source`] to warm-start the next solve of the same [`Prepared`] scene,
+/// or to [`Prepared::resume_with_source`] to go on with the iteration (interactive relighting).
 #[derive(Clone, Debug, Default)]
 pub struct ElementState {
     /// Outgoing radiance per element, RGB (normalized units).
@@ -97,6 +98,29 @@ pub struct ElementState {
     anti: Vec<f32>,
     /// Colour channels of `anti`: 1 (grey solve) or 3.
     channels: usize,
+    /// The per-element source the state was solved for (RGB, normalized units).
+    source: Vec<[f64; 3]>,
+    /// Where the iteration stood ([`Prepared::resume_with_source`] goes on from it).
+    resume: Option<Box<Resume>>,
+}
+
+/// Where a solve's iteration stood when it stopped, so that the next solve of the same scene
+/// can go on from there.
+#[derive(Clone, Debug)]
+struct Resume {
+    /// Anderson's history. Its differences of sweeps do not depend on the source (the sweep is
+    /// linear in it), so a solve of another source keeps them
+    /// ([`crate::solve::accelerate::Anderson::new_source`]).
+    anderson: Option<Anderson>,
+    /// The convergence estimate, health guard and statistics of the source solved, continued
+    /// only by a solve of the same source.
+    convergence: Convergence,
+    guard: Guard,
+    /// Sweeps done for this source (over every call that went on with it).
+    sweeps: usize,
+    max_row_sum: f64,
+    extrapolations: usize,
+    damped_after: Option<usize>,
 }
 
 /// Radiance per element and antiradiance per stored slot, in `C` channels.
@@ -106,6 +130,18 @@ impl ElementState {
     /// Outgoing radiance per element (normalized units, element order of [`Prepared`]).
     pub fn radiance(&self) -> &[[f64; 3]] {
         &self.radiance
+    }
+
+    /// The per-element source the state was solved for (normalized units, element order of
+    /// [`Prepared`]).
+    pub fn source(&self) -> &[[f64; 3]] {
+        &self.source
+    }
+
+    /// Sweeps done for the source of this state, over every call that went on with it
+    /// ([`Prepared::resume_with_source`]); 0 when unknown.
+    pub fn sweeps(&self) -> usize {
+        self.resume.as_ref().map_or(0, |r| r.sweeps)
     }
 
     /// The state in `C` channels, or `None` when it does not belong to a scene with `n`
@@ -486,15 +522,22 @@ impl Prepared {
         warm: Option<&ElementState>,
         progress: &Progress,
     ) -> (Solution, ElementState) {
-        assert_eq!(patch_emission.len(), patches.len());
-        let source: Vec<[f64; 3]> = self
-            .elem_patch
-            .iter()
-            .map(|&p| patch_emission[p as usize])
-            .collect();
+        let source = self.element_source(patch_emission);
         // Patches the tree does not hold (inactive: zero area, duplicates) are settled by
         // `Solution::from_normalized` from their own emission or their twin.
         self.solve_with_source(patches, &source, warm, progress)
+    }
+
+    /// The per-element source of a per-patch one (each element takes its patch's value), in
+    /// the element order of [`Prepared::elements`].
+    ///
+    /// # Panics
+    /// When a patch of an element is out of range of `patch_source`.
+    pub fn element_source(&self, patch_source: &[[f64; 3]]) -> Vec<[f64; 3]> {
+        self.elem_patch
+            .iter()
+            .map(|&p| patch_source[p as usize])
+            .collect()
     }
 
     /// Solves `B_e = source_e + rho_e H_e(B)` for a per-element source radiance (normalized
@@ -515,12 +558,66 @@ impl Prepared {
         warm: Option<&ElementState>,
         progress: &Progress,
     ) -> (Solution, ElementState) {
+        self.solve_from(patches, elem_source, warm, None, None, progress)
+    }
+
+    /// [`Prepared::solve_with_source`] going on from `state` (taken, with its Anderson history),
+    /// for interactive relighting:
+    ///
+    /// - when `state` was solved for this same source, the iteration goes on where it stopped
+    ///   (its sweep count, convergence estimate, health checks and Anderson history), so that
+    ///   calls with a `deadline` converge over calls (progressive relighting);
+    /// - for another source it starts from `state` with each element's radiance moved by the
+    ///   change of its source (what the first sweep would do) and keeps Anderson's history,
+    ///   whose differences of sweeps do not depend on the source: the slow modes the previous
+    ///   solve found are removed from the first step on;
+    /// - without a state that belongs to this scene, it solves from the source.
+    ///
+    /// With a `deadline` it stops after the last sweep expected to end before it (each sweep
+    /// expected to take as long as the one before; at least one sweep), with `converged` false
+    /// unless the tolerance was reached: call again with the returned state to go on. The
+    /// solution's `iterations` are the sweeps of this call; [`ElementState::sweeps`] counts
+    /// those of the source over every call.
+    ///
+    /// # Panics
+    /// When `elem_source.len() != self.element_count()`.
+    pub fn resume_with_source(
+        &mut self,
+        patches: &Patches,
+        elem_source: &[[f64; 3]],
+        state: Option<ElementState>,
+        deadline: Option<Instant>,
+        progress: &Progress,
+    ) -> (Solution, ElementState) {
+        let mut state = state;
+        let resume = state.as_mut().and_then(|s| s.resume.take());
+        self.solve_from(
+            patches,
+            elem_source,
+            state.as_ref(),
+            resume.map(|r| *r),
+            deadline,
+            progress,
+        )
+    }
+
+    /// The solve of [`Prepared::solve_with_source`] and [`Prepared::resume_with_source`], in
+    /// the channels the source and albedos need.
+    fn solve_from(
+        &mut self,
+        patches: &Patches,
+        elem_source: &[[f64; 3]],
+        warm: Option<&ElementState>,
+        resume: Option<Resume>,
+        deadline: Option<Instant>,
+        progress: &Progress,
+    ) -> (Solution, ElementState) {
         assert_eq!(elem_source.len(), self.element_count());
         let grey = self.albedo_grey && elem_source.iter().all(|s| model::is_grey(*s));
         if grey {
-            self.solve_channels::<1>(patches, elem_source, warm, progress)
+            self.solve_channels::<1>(patches, elem_source, warm, resume, deadline, progress)
         } else {
-            self.solve_channels::<3>(patches, elem_source, warm, progress)
+            self.solve_channels::<3>(patches, elem_source, warm, resume, deadline, progress)
         }
     }
 
@@ -546,12 +643,15 @@ impl Prepared {
         2 * (n * 8 * channels + self.live.slots() as u64 * 4 * channels)
     }
 
-    /// [`Prepared::solve_with_source`] in `C` colour channels (1 or 3).
+    /// [`Prepared::solve_from`] in `C` colour channels (1 or 3).
+    #[allow(clippy::too_many_arguments)]
     fn solve_channels<const C: usize>(
         &mut self,
         patches: &Patches,
         elem_source: &[[f64; 3]],
         warm: Option<&ElementState>,
+        resume: Option<Resume>,
+        deadline: Option<Instant>,
         progress: &Progress,
     ) -> (Solution, ElementState) {
         let t0 = Instant::now();
@@ -565,9 +665,30 @@ impl Prepared {
         let slots = live.slots();
         let emission: Vec<[f64; C]> = elem_source.iter().map(|&s| channels_of(s)).collect();
         let albedo: Vec<[f64; C]> = self.elem_albedo.iter().map(|&a| channels_of(a)).collect();
-        let (mut radiance, mut anti) = warm
-            .and_then(|w| w.to_channels::<C>(n, slots))
-            .unwrap_or_else(|| (emission.clone(), vec![[0.0f32; C]; slots]));
+        // A warm start that belongs to this scene: the same source goes on with its iteration;
+        // another one moves each element's radiance by the change of its source.
+        let warm = warm.and_then(|w| w.to_channels::<C>(n, slots).map(|values| (w, values)));
+        let matched = warm.is_some();
+        let same_source = warm.as_ref().is_some_and(|(w, _)| w.source == elem_source);
+        let (mut radiance, mut anti) = match warm {
+            Some((w, (mut radiance, anti))) => {
+                if !same_source && w.source.len() == n {
+                    for (b, (new, old)) in radiance.iter_mut().zip(emission.iter().zip(&w.source)) {
+                        let old = channels_of::<C>(*old);
+                        for c in 0..C {
+                            b[c] += new[c] - old[c];
+                        }
+                    }
+                }
+                (radiance, anti)
+            }
+            None => (emission.clone(), vec![[0.0f32; C]; slots]),
+        };
+        let resume = resume.filter(|_| matched);
+        let (resume, going_on) = match resume {
+            Some(r) if same_source => (Some(r), true),
+            other => (other, false),
+        };
         let mut next_radiance = radiance.clone();
         let mut next_anti = anti.clone();
         let mut intensity = vec![[0.0f32; C]; self.links.cluster.len()];
@@ -609,11 +730,27 @@ impl Prepared {
             .antiradiance
             .then(|| health::radiance_bound(source_max, rho_max));
         let mut guard = Guard::new(bound, reference_mass, patches.emission_scale);
+        // Going on with the same source: its convergence estimate, health checks and counts.
+        let mut first = 1;
+        let mut kept_anderson = None;
+        if let Some(r) = resume {
+            kept_anderson = r
+                .anderson
+                .filter(|a| a.len() == state_len_of::<C>(n, slots));
+            if going_on {
+                convergence = r.convergence;
+                guard = r.guard;
+                first = r.sweeps + 1;
+                stats.max_row_sum = r.max_row_sum;
+                stats.extrapolations = r.extrapolations;
+                stats.damped_after = r.damped_after;
+            }
+        }
         // Anderson acceleration when its history (and the flat copies of the state it mixes)
         // fits its own budget and what the model leaves of the memory limit; its residuals
         // shrink faster than the plain sweep's contraction, so the remaining error is estimated
         // with the largest albedo as the contraction bound instead.
-        let state_len = (n + slots) * C;
+        let state_len = state_len_of::<C>(n, slots);
         let depth = options.acceleration_depth;
         let history = Anderson::bytes(state_len, depth) + 16 * state_len as u64;
         let mut memory = self.memory.clone();
@@ -642,6 +779,12 @@ impl Prepared {
             Some(why) => format!("extrapolation ({why})"),
         };
         let mut anderson = accelerate.then(|| {
+            if let Some(mut kept) = kept_anderson {
+                if !going_on {
+                    kept.new_source();
+                }
+                return kept;
+            }
             let mut weight = Vec::with_capacity(state_len);
             for &a in &self.elem_area {
                 weight.extend(std::iter::repeat_n(a, C));
@@ -655,7 +798,9 @@ impl Prepared {
         });
         if anderson.is_some() {
             convergence.contraction_bound = Some(rho_max);
-            stats.extrapolations = 0;
+            if !going_on {
+                stats.extrapolations = 0;
+            }
         }
         let (mut x_flat, mut g_flat) = (Vec::new(), Vec::new());
         let links = &self.links;
@@ -667,7 +812,10 @@ impl Prepared {
         let pairs = self.pairs.as_ref();
         let ctx = self.sweep_context();
 
-        for iteration in 1..=options.max_iterations {
+        let mut last = first - 1;
+        for iteration in first..first + options.max_iterations {
+            let sweep_start = Instant::now();
+            last = iteration;
             // 1. Sender summaries: per normal group of every large node, the area-weighted sums of
             //    B and of each antiradiance bin (bottom-up, children before parents).
             groups.accumulate(
@@ -808,7 +956,7 @@ impl Prepared {
             let sums = change_parts
                 .iter()
                 .fold(SweepSums::default(), |acc, p| acc.add(*p));
-            if iteration == 1 {
+            if iteration == first && !going_on {
                 stats.max_row_sum = sums.max_row;
             }
             let change = change_ratio(sums.num, sums.den);
@@ -855,7 +1003,16 @@ impl Prepared {
                     }
                 }
             }
+            // Out of time when the next sweep, as long as this one, would end after the
+            // deadline.
+            if let Some(deadline) = deadline {
+                let now = Instant::now();
+                if now + (now - sweep_start) > deadline {
+                    break;
+                }
+            }
         }
+        stats.iterations = last + 1 - first;
         stats.residual = convergence.residual;
 
         // Elements -> patches (area-weighted mean, RGB); patches without elements (inactive) get
@@ -888,13 +1045,30 @@ impl Prepared {
             options.clamp_negative,
             bound,
         );
+        let resume = Resume {
+            anderson,
+            convergence,
+            guard,
+            sweeps: last,
+            max_row_sum: solution.stats.max_row_sum,
+            extrapolations: solution.stats.extrapolations,
+            damped_after: solution.stats.damped_after,
+        };
         let state = ElementState {
             radiance: radiance_rgb,
             anti: anti.iter().flatten().copied().collect(),
             channels: C,
+            source: elem_source.to_vec(),
+            resume: Some(Box::new(resume)),
         };
         (solution, state)
     }
+}
+
+/// Entries of the flat state (radiance, then antiradiance slots) of `n` elements and `slots`
+/// stored bins in `C` channels: what Anderson acceleration mixes.
+fn state_len_of<const C: usize>(n: usize, slots: usize) -> usize {
+    (n + slots) * C
 }
 
 /// The `C` channels (3: RGB as is; 1: the mean) of an RGB triple.
