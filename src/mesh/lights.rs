@@ -86,18 +86,44 @@ const SEED: u64 = 0x5eed_119a_7000_0001;
 /// patch from `lights` (which must be in the unit frame, normalized as [`Light::to_unit`]
 /// makes them), with shadow rays against the active patches. Inactive patches get 0.
 ///
+/// The sum of [`light_source`] over the lights, each light `k` with its own random streams:
+/// so one light's share can be recomputed alone when it moves (relighting), and is the same
+/// as in the sum.
+pub fn direct_source(patches: &Patches, lights: &[Light]) -> Vec<[f64; 3]> {
+    let mut total = vec![[0.0; 3]; patches.len()];
+    if lights.is_empty() {
+        return total;
+    }
+    let rays = RayScene::new(&patches.corners, &patches.active);
+    for (k, light) in lights.iter().enumerate() {
+        for (sum, d) in total.iter_mut().zip(light_source(patches, &rays, light, k)) {
+            for c in 0..3 {
+                sum[c] += d[c];
+            }
+        }
+    }
+    total
+}
+
+/// The reflected direct radiance of every patch from one light (unit frame, as
+/// [`direct_source`]), `index` its place among the scene's lights (which picks its random
+/// streams), with shadow rays against `rays` (the active patches: `RayScene::new(&patches.corners,
+/// &patches.active)`). Inactive patches get 0.
+///
 /// Delta lights: [`PILOT_POINTS`] stratified points on the patch, each with its exact
 /// unoccluded irradiance times its visibility; where their visibilities differ,
 /// [`EDGE_POINTS`] points instead. The sky: cosine-weighted rays from stratified points
 /// ([`SKY_RAY_BUDGET`]), each that escapes the scene carries the sky's radiance. Deterministic
-/// (each patch its own random stream).
-pub fn direct_source(patches: &Patches, lights: &[Light]) -> Vec<[f64; 3]> {
-    if lights.is_empty() {
-        return vec![[0.0; 3]; patches.len()];
-    }
-    let rays = RayScene::new(&patches.corners, &patches.active);
+/// (each patch and light its own random stream). Linear in the light's colour.
+pub fn light_source(
+    patches: &Patches,
+    rays: &RayScene,
+    light: &Light,
+    index: usize,
+) -> Vec<[f64; 3]> {
     let sky_rays =
         (SKY_RAY_BUDGET / patches.active_count().max(1)).clamp(MIN_SKY_RAYS, MAX_SKY_RAYS);
+    let seed = SEED.wrapping_add(index as u64);
     (0..patches.len())
         .into_par_iter()
         .map(|p| {
@@ -105,7 +131,8 @@ pub fn direct_source(patches: &Patches, lights: &[Light]) -> Vec<[f64; 3]> {
             if !patches.active[p] || rho.iter().all(|&r| r <= 0.0) {
                 return [0.0; 3];
             }
-            let h = irradiance(patches, &rays, p, lights, sky_rays);
+            let mut rng = Rng::new(seed, p as u64);
+            let h = irradiance(patches, rays, p, light, sky_rays, &mut rng);
             [0, 1, 2].map(|c| {
                 let d = rho[c] * h[c] / PI;
                 if d.is_finite() {
@@ -118,52 +145,44 @@ pub fn direct_source(patches: &Patches, lights: &[Light]) -> Vec<[f64; 3]> {
         .collect()
 }
 
-/// Mean direct irradiance of patch `p` from `lights` (unit frame).
+/// Mean direct irradiance of patch `p` from `light` (unit frame).
 fn irradiance(
     patches: &Patches,
     rays: &RayScene,
     p: usize,
-    lights: &[Light],
+    light: &Light,
     sky_rays: usize,
+    rng: &mut Rng,
 ) -> [f64; 3] {
     let tri = patches.corners[p];
     let n = patches.normal[p];
-    let mut rng = Rng::new(SEED, p as u64);
-    let mut total = [0.0f64; 3];
-    for light in lights {
-        let h = match light {
-            Light::Sky { radiance } => {
-                let k = sky_rays.isqrt();
-                let mut escaped = 0usize;
-                for i in 0..k * k {
-                    let (a, b) = (
-                        ((i % k) as f64 + rng.next_f64()) / k as f64,
-                        ((i / k) as f64 + rng.next_f64()) / k as f64,
-                    );
-                    let x = point_on_triangle(&tri, a.min(1.0), b.min(1.0));
-                    let w =
-                        cosine_direction(n, rng.next_f64().min(1.0 - f64::EPSILON), rng.next_f64());
-                    if rays.visible(x, w, FAR, p, usize::MAX) {
-                        escaped += 1;
-                    }
-                }
-                let f = escaped as f64 / (k * k) as f64;
-                radiance.map(|l| PI * l * f)
-            }
-            _ => {
-                let pilot = delta_points(rays, &tri, n, p, light, PILOT_POINTS, &mut rng);
-                if pilot.1 {
-                    delta_points(rays, &tri, n, p, light, EDGE_POINTS, &mut rng).0
-                } else {
-                    pilot.0
+    match light {
+        Light::Sky { radiance } => {
+            let k = sky_rays.isqrt();
+            let mut escaped = 0usize;
+            for i in 0..k * k {
+                let (a, b) = (
+                    ((i % k) as f64 + rng.next_f64()) / k as f64,
+                    ((i / k) as f64 + rng.next_f64()) / k as f64,
+                );
+                let x = point_on_triangle(&tri, a.min(1.0), b.min(1.0));
+                let w = cosine_direction(n, rng.next_f64().min(1.0 - f64::EPSILON), rng.next_f64());
+                if rays.visible(x, w, FAR, p, usize::MAX) {
+                    escaped += 1;
                 }
             }
-        };
-        for c in 0..3 {
-            total[c] += h[c];
+            let f = escaped as f64 / (k * k) as f64;
+            radiance.map(|l| PI * l * f)
+        }
+        _ => {
+            let pilot = delta_points(rays, &tri, n, p, light, PILOT_POINTS, rng);
+            if pilot.1 {
+                delta_points(rays, &tri, n, p, light, EDGE_POINTS, rng).0
+            } else {
+                pilot.0
+            }
         }
     }
-    total
 }
 
 /// Mean irradiance from one delta light over the triangle, from `count` stratified points,

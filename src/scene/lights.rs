@@ -139,12 +139,29 @@ impl Light {
 
     /// The largest colour channel (intensity, irradiance or radiance).
     pub fn strength(&self) -> f64 {
-        let c = match self {
+        let c = self.colour();
+        c[0].max(c[1]).max(c[2])
+    }
+
+    /// Its colour: the intensity of a point or spot light (W / sr), the irradiance of a sun
+    /// (W / m^2), the radiance of a sky (W / (m^2 sr)), RGB. The light it gives is linear in it.
+    pub fn colour(&self) -> [f64; 3] {
+        match *self {
             Light::Point { intensity, .. } | Light::Spot { intensity, .. } => intensity,
             Light::Sun { irradiance, .. } => irradiance,
             Light::Sky { radiance } => radiance,
-        };
-        c[0].max(c[1]).max(c[2])
+        }
+    }
+
+    /// The same light with colour `rgb` ([`Light::colour`]).
+    pub fn with_colour(&self, rgb: [f64; 3]) -> Light {
+        let mut light = *self;
+        match &mut light {
+            Light::Point { intensity, .. } | Light::Spot { intensity, .. } => *intensity = rgb,
+            Light::Sun { irradiance, .. } => *irradiance = rgb,
+            Light::Sky { radiance } => *radiance = rgb,
+        }
+        light
     }
 
     /// For a delta light (point, spot, sun): the unit direction from `x` towards the light,
