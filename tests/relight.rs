@@ -6,13 +6,18 @@
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
+use std::time::Duration;
 
 use antiradiance::mesh::build_patches;
 use antiradiance::progress::Progress;
 use antiradiance::scene::generated::{self, CORNELL_BOX_PARTS};
+use antiradiance::scene::lights::Light;
 use antiradiance::scene::{load_obj, Scene, SceneOptions};
 use antiradiance::solve::hierarchical::solve_hierarchical;
-use antiradiance::solve::relight::{frame_path, sweep_weights, Relighter};
+use antiradiance::solve::relight::{
+    animated_light, check_light_changes, frame_path, light_phase, sweep_weights, LightChange,
+    Relighter,
+};
 use antiradiance::solve::solution::error_against;
 use antiradiance::solve::solution::Solution;
 use antiradiance::solve::SolverOptions;
@@ -256,6 +261,331 @@ fn warm_start_takes_fewer_iterations_than_cold_for_a_small_change() {
     assert!(wi < ci, "warm {wi} iterations, cold {ci}");
     let err = error_against(&scene, &warm.solution, &cold.solution);
     assert!(err < 0.01, "{:.3}%", 100.0 * err);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Analytic lights
+
+/// `scene` with analytic light 0 replaced.
+fn with_light(scene: &Scene, light: Light) -> Scene {
+    let mut s = scene.clone();
+    s.lights[0] = light;
+    s
+}
+
+/// The Cornell box lit by its area light and a point light near the ceiling.
+fn cornell_with_point() -> (Scene, Light) {
+    let mut scene = generated::cornell_box();
+    let light = Light::Point {
+        position: DVec3::new(278.0, 450.0, 279.0),
+        intensity: [4e4, 3.5e4, 3e4],
+    };
+    scene.lights.push(light);
+    (scene, light)
+}
+
+/// The Cornell box without its ceiling and area light (open to the sky), lit by `light` alone:
+/// the walls, floor and blocks exchange light.
+fn open_box_lit_by(light: Light) -> Scene {
+    let full = generated::cornell_box();
+    let (ceiling, area) = (cornell_part("ceiling"), cornell_part("light"));
+    let keep: Vec<usize> = (0..full.len())
+        .filter(|t| !ceiling.contains(t) && !area.contains(t))
+        .collect();
+    let corners: Vec<[DVec3; 3]> = keep.iter().map(|&t| full.corners(t)).collect();
+    let albedo: Vec<[f64; 3]> = keep.iter().map(|&t| full.albedo[t]).collect();
+    let mut scene = Scene::from_triangles(&corners, &albedo, &vec![[0.0; 3]; keep.len()]);
+    scene.lights.push(light);
+    scene
+}
+
+#[test]
+fn moved_analytic_lights_match_cold_solves_at_the_new_place() {
+    let options = SolverOptions::default();
+    let (cornell, _) = cornell_with_point();
+    let spot = Light::Spot {
+        position: DVec3::new(278.0, 500.0, 279.0),
+        direction: DVec3::new(0.0, -1.0, 0.0),
+        intensity: [6e4; 3],
+        inner: 20f64.to_radians(),
+        outer: 35f64.to_radians(),
+    };
+    let sun = Light::Sun {
+        direction: DVec3::new(0.3, -1.0, 0.2),
+        irradiance: [2.0, 1.8, 1.5],
+    };
+    let cases = [
+        (
+            "point moved",
+            cornell.clone(),
+            Light::Point {
+                position: DVec3::new(120.0, 300.0, 420.0),
+                intensity: [4e4, 3.5e4, 3e4],
+            },
+        ),
+        (
+            "spot turned towards the red wall",
+            with_light(&cornell, spot),
+            Light::Spot {
+                position: DVec3::new(278.0, 500.0, 279.0),
+                direction: DVec3::new(-1.0, -0.6, 0.1),
+                intensity: [6e4; 3],
+                inner: 20f64.to_radians(),
+                outer: 35f64.to_radians(),
+            },
+        ),
+        (
+            "sun lowered",
+            open_box_lit_by(sun),
+            Light::Sun {
+                direction: DVec3::new(-1.0, -0.4, 0.3),
+                irradiance: [2.0, 1.8, 1.5],
+            },
+        ),
+    ];
+    for (name, scene, moved) in cases {
+        let mut relighter = Relighter::new(&scene, None, &options).unwrap();
+        let before = relighter.solve(&Progress::hidden());
+        assert!(before.solution.stats.converged, "{name}");
+        assert!(before.direct_seconds > 0.0, "{name}: shadow rays traced");
+        relighter.set_analytic_light(0, moved).unwrap();
+        assert_eq!(relighter.analytic_lights()[0], moved, "{name}");
+        let relit = relighter.solve(&Progress::hidden());
+        assert!(
+            relit.warm_started && relit.solution.stats.converged,
+            "{name}"
+        );
+        assert!(
+            relit.direct_seconds > 0.0,
+            "{name}: shadow rays traced again"
+        );
+        assert_finite(&relit.solution);
+        let truth_scene = with_light(&scene, moved);
+        let truth = from_scratch(&truth_scene, &options);
+        let err = error_against(&truth_scene, &relit.solution, &truth);
+        assert!(err < 0.005, "{name}: {:.3}% from a cold solve", 100.0 * err);
+        // The move matters: the light as it was is far from the new answer.
+        let stale = error_against(&truth_scene, &before.solution, &truth);
+        assert!(
+            stale > 0.05,
+            "{name}: the move changed only {:.2}%",
+            100.0 * stale
+        );
+    }
+}
+
+#[test]
+fn dimming_a_light_by_k_scales_the_result_by_k_without_new_shadow_rays() {
+    let options = SolverOptions::default();
+    let point = Light::Point {
+        position: DVec3::new(200.0, 400.0, 300.0),
+        intensity: [4e4, 3e4, 2e4],
+    };
+    let sky = Light::Sky {
+        radiance: [0.3, 0.4, 0.5],
+    };
+    for light in [point, sky] {
+        let scene = open_box_lit_by(light);
+        let mut relighter = Relighter::new(&scene, None, &options).unwrap();
+        let full = relighter.solve(&Progress::hidden());
+        // Each channel by its own factor (the red one by 0.3).
+        let k = [0.3, 0.5, 1.0];
+        let c = light.colour();
+        relighter
+            .set_analytic_light(0, light.with_colour([0, 1, 2].map(|i| k[i] * c[i])))
+            .unwrap();
+        let dimmed = relighter.solve(&Progress::hidden());
+        assert_eq!(
+            dimmed.direct_seconds, 0.0,
+            "{light:?}: no shadow ray traced again"
+        );
+        assert!(dimmed.warm_started && dimmed.solution.stats.converged);
+        let (mut num, mut den) = ([0.0f64; 3], [0.0f64; 3]);
+        for t in 0..scene.len() {
+            let a = scene.area(t);
+            for i in 0..3 {
+                let want = k[i] * full.solution.triangle_radiance[t][i];
+                num[i] += a * (dimmed.solution.triangle_radiance[t][i] - want).abs();
+                den[i] += a * want;
+            }
+        }
+        for i in 0..3 {
+            assert!(den[i] > 0.0, "{light:?}: channel {i} lit");
+            assert!(
+                num[i] / den[i] < 0.002,
+                "{light:?} channel {i}: {:.3}% from {} times the full light",
+                100.0 * num[i] / den[i],
+                k[i]
+            );
+        }
+        // Off is black.
+        relighter
+            .set_analytic_light(0, light.with_colour([0.0; 3]))
+            .unwrap();
+        let off = relighter.solve(&Progress::hidden());
+        assert!(off
+            .solution
+            .triangle_radiance
+            .iter()
+            .all(|b| b.iter().all(|&x| x.abs() < 1e-12)));
+    }
+}
+
+#[test]
+fn progressive_relighting_converges_over_frames_to_the_converged_answer() {
+    let scene = generated::cornell_box();
+    let options = SolverOptions::default();
+    let mut relighter = Relighter::new(&scene, None, &options).unwrap();
+    relighter.solve(&Progress::hidden());
+    // One sweep per frame: a zero budget still sweeps once.
+    relighter.frame_budget = Some(Duration::ZERO);
+    let mut e = scene.emission.clone();
+    let light = cornell_part("light");
+    e[light.start] = [2.0, 6.0, 1.0];
+    let ceiling = cornell_part("ceiling");
+    e[ceiling.start] = [1.0, 2.0, 30.0];
+    relighter.set_emission(&e).unwrap();
+    let truth = relighter.converged(&Progress::hidden()).solution;
+    let reference = from_scratch(&with_emission(&scene, &e), &options);
+    assert!(error_against(&scene, &truth, &reference) < 0.005);
+    let mut errors = Vec::new();
+    loop {
+        let relit = relighter.solve(&Progress::hidden());
+        assert!(relit.warm_started);
+        assert_eq!(relit.solution.stats.iterations, 1, "frame {}", errors.len());
+        errors.push(error_against(&scene, &relit.solution, &truth));
+        if relit.solution.stats.converged {
+            break;
+        }
+        assert!(
+            errors.len() < 60,
+            "not converged after 60 frames: {errors:?}"
+        );
+    }
+    assert!(errors.len() >= 3, "converged in {} frames", errors.len());
+    let (first, last) = (errors[0], *errors.last().unwrap());
+    assert!(last < 0.005, "{:.3}% at convergence", 100.0 * last);
+    assert!(first > 2.0 * last, "frames: {errors:?}");
+    // Nothing changed since the converged frame: no sweep, the same answer.
+    let again = relighter.solve(&Progress::hidden());
+    assert_eq!(again.solution.stats.iterations, 0);
+    assert!(again.solution.stats.converged);
+    assert!(error_against(&scene, &again.solution, &truth) <= last + 1e-12);
+    // A generous budget converges within the frame.
+    relighter.frame_budget = Some(Duration::from_secs(60));
+    relighter.relight(&scene.emission).unwrap();
+    let within = relighter.solve(&Progress::hidden());
+    assert!(within.solution.stats.converged);
+}
+
+#[test]
+fn bad_analytic_light_changes_are_rejected_and_change_nothing() {
+    let (scene, point) = cornell_with_point();
+    let mut relighter = Relighter::new(&scene, None, &SolverOptions::fast()).unwrap();
+    assert_parameter_error(
+        relighter.set_analytic_light(1, point),
+        "no analytic light 1: the scene has 1 (numbered from 0: 0 point)",
+    );
+    let bad = Light::Point {
+        position: DVec3::new(f64::NAN, 0.0, 0.0),
+        intensity: [1.0; 3],
+    };
+    assert_parameter_error(relighter.set_analytic_light(0, bad), "analytic light 0");
+    let negative = point.with_colour([1.0, -1.0, 0.0]);
+    assert_parameter_error(
+        relighter.set_analytic_light(0, negative),
+        "analytic light 0",
+    );
+    assert_eq!(relighter.analytic_lights(), vec![point]);
+    // A lit analytic light is not a precomputed emission light: mix refuses it.
+    relighter.add_light("area", &scene.emission).unwrap();
+    assert_parameter_error(relighter.mix(&[[1.0; 3]]), "analytic");
+    relighter
+        .set_analytic_light(0, point.with_colour([0.0; 3]))
+        .unwrap();
+    assert!(relighter.mix(&[[1.0; 3]]).is_ok());
+    // A scene without analytic lights says so.
+    let mut plain =
+        Relighter::new(&generated::cornell_box(), None, &SolverOptions::fast()).unwrap();
+    assert_parameter_error(
+        plain.set_analytic_light(0, point),
+        "the scene has no analytic lights",
+    );
+    // Animation changes: an index that names no light, a moving sky, a sun turned to its
+    // opposite, a negative factor.
+    let sky = Light::Sky { radiance: [1.0; 3] };
+    let sun = Light::Sun {
+        direction: DVec3::new(0.0, -1.0, 0.0),
+        irradiance: [1.0; 3],
+    };
+    let lights = [point, sky, sun];
+    let to = DVec3::new(1.0, 2.0, 3.0);
+    for (change, needle) in [
+        (LightChange::MoveTo { light: 3, to }, "no analytic light 3"),
+        (LightChange::MoveTo { light: 1, to }, "sky"),
+        (
+            LightChange::MoveTo {
+                light: 2,
+                to: DVec3::new(0.0, 1.0, 0.0),
+            },
+            "opposite",
+        ),
+        (
+            LightChange::Scale {
+                light: 0,
+                factor: -0.5,
+            },
+            ">= 0",
+        ),
+    ] {
+        assert_parameter_error(check_light_changes(&lights, &[change]), needle);
+    }
+    assert!(check_light_changes(&lights, &[LightChange::MoveTo { light: 0, to }]).is_ok());
+}
+
+#[test]
+fn animated_lights_move_in_straight_lines_and_scale_linearly() {
+    let point = Light::Point {
+        position: DVec3::new(0.0, 1.0, 0.0),
+        intensity: [2.0, 4.0, 6.0],
+    };
+    let changes = [
+        LightChange::MoveTo {
+            light: 0,
+            to: DVec3::new(2.0, 1.0, -4.0),
+        },
+        LightChange::Scale {
+            light: 0,
+            factor: 0.5,
+        },
+    ];
+    assert_eq!(light_phase(0, 5), 0.0);
+    assert_eq!(light_phase(4, 5), 1.0);
+    assert_eq!(light_phase(0, 1), 1.0);
+    assert_eq!(animated_light(&point, 0, &changes, 0.0), point);
+    assert_eq!(
+        animated_light(&point, 0, &changes, 0.5),
+        Light::Point {
+            position: DVec3::new(1.0, 1.0, -2.0),
+            intensity: [1.5, 3.0, 4.5],
+        }
+    );
+    // Changes of another light leave it as it is.
+    assert_eq!(animated_light(&point, 1, &changes, 1.0), point);
+    // A sun turns between unit directions.
+    let sun = Light::Sun {
+        direction: DVec3::new(0.0, -2.0, 0.0),
+        irradiance: [1.0; 3],
+    };
+    let turn = [LightChange::MoveTo {
+        light: 0,
+        to: DVec3::new(1.0, 0.0, 0.0),
+    }];
+    let Light::Sun { direction, .. } = animated_light(&sun, 0, &turn, 0.5) else {
+        panic!("a sun stays a sun");
+    };
+    let want = DVec3::new(1.0, -1.0, 0.0).normalize();
+    assert!((direction - want).length() < 1e-12, "{direction}");
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -591,6 +921,112 @@ fn cli_writes_one_frame_per_relight_and_a_report() {
 }
 
 #[test]
+fn cli_moves_and_dims_an_analytic_light_progressively() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = lamps_scene(dir.path());
+    let out = dir.path().join("frames");
+    let report = dir.path().join("relight.json");
+    // Emitters kept as they are (--dim 1); the point light moves and dims over frames 0..=2,
+    // frame 3 holds it; one sweep per frame at most.
+    let o = run(&[
+        "relight",
+        s(&scene),
+        "--light",
+        "point:0,0.5,0:0.2,0.2,0.2",
+        "--frames",
+        "4",
+        "--hold",
+        "1",
+        "--dim",
+        "1",
+        "--move-light",
+        "0:0.5,0.5,0.5",
+        "--scale-light",
+        "0:0.5",
+        "--frame-budget",
+        "0",
+        "--errors",
+        "--out",
+        s(&out),
+        "--report",
+        s(&report),
+        "--width",
+        "64",
+        "--height",
+        "48",
+        "--quiet",
+    ]);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{stdout} {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(
+        stdout.contains("progressive within 0 ms per frame"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("error against the converged answer"),
+        "{stdout}"
+    );
+    for frame in 0..4 {
+        assert!(frame_path(&out, frame).exists(), "frame {frame}");
+    }
+    let json: Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_eq!(json["parameters"]["frame_budget_ms"], 0.0);
+    assert_eq!(json["parameters"]["move_light"][0], "0:0.5,0.5,0.5");
+    assert_eq!(json["parameters"]["scale_light"][0], "0:0.5");
+    assert!(json["initial_seconds"].as_f64().unwrap() > 0.0);
+    let frames = json["frames"].as_array().unwrap();
+    let field = |f: usize, name: &str| frames[f][name].as_f64().unwrap();
+    // Frame 0 is the lighting the initial solve converged: nothing to do.
+    assert_eq!(frames[0]["iterations"], 0);
+    assert_eq!(field(0, "direct_seconds"), 0.0);
+    assert!(field(0, "error_vs_converged") < 1e-3);
+    // Frames 1 and 2 move the light: its shadow rays are traced again, one sweep each.
+    for f in [1, 2] {
+        assert_eq!(frames[f]["iterations"], 1, "frame {f}");
+        assert!(field(f, "direct_seconds") > 0.0, "frame {f}");
+        assert!(field(f, "error_vs_converged").is_finite());
+        assert!(frames[f]["warm_started"].as_bool().unwrap());
+    }
+    // Frame 3 holds the light: no new shadow rays, the solve goes on and gets closer.
+    assert_eq!(field(3, "direct_seconds"), 0.0);
+    assert!(
+        field(3, "error_vs_converged") < field(2, "error_vs_converged"),
+        "{frames:?}"
+    );
+    let mean = json["summary"]["mean_error"].as_f64().unwrap();
+    let max = json["summary"]["max_error"].as_f64().unwrap();
+    assert!(mean > 0.0 && mean <= max, "{mean} {max}");
+
+    // A scene without emitting triangles relights its analytic light alone.
+    let plain = dir.path().join("plain.obj");
+    std::fs::write(&plain, "v 0 0 0\nv 1 0 0\nv 0 0 -1\nf 1 2 3\n").unwrap();
+    let o = run(&[
+        "relight",
+        s(&plain),
+        "--light",
+        "point:0.2,1,-0.2:1,1,1",
+        "--frames",
+        "2",
+        "--scale-light",
+        "0:0.25",
+        "--out",
+        s(&dir.path().join("plain_frames")),
+        "--report",
+        s(&report),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let json: Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let frames = json["frames"].as_array().unwrap();
+    assert_eq!(frames[0]["direct_seconds"].as_f64().unwrap() > 0.0, true);
+    assert_eq!(frames[1]["direct_seconds"].as_f64().unwrap(), 0.0);
+}
+
+#[test]
 fn cli_mixes_precomputed_band_lights() {
     let dir = tempfile::tempdir().unwrap();
     let scene = lamps_scene(dir.path());
@@ -690,6 +1126,109 @@ fn cli_fails_cleanly_on_bad_arguments() {
         ),
         (vec!["--frames".into(), "abc".into()], "--frames", 2),
         (vec![], "--frames", 2),
+        (
+            vec!["--frames".into(), "2".into(), "--hold".into(), "2".into()],
+            "--hold",
+            1,
+        ),
+        (
+            vec![
+                "--frames".into(),
+                "2".into(),
+                "--frame-budget".into(),
+                "-5".into(),
+            ],
+            "--frame-budget",
+            1,
+        ),
+        (
+            vec![
+                "--frames".into(),
+                "2".into(),
+                "--frame-budget".into(),
+                "nan".into(),
+            ],
+            "--frame-budget",
+            1,
+        ),
+        (
+            vec![
+                "--frames".into(),
+                "2".into(),
+                "--frame-budget".into(),
+                "10".into(),
+                "--bands".into(),
+                "2".into(),
+            ],
+            "--frame-budget",
+            2,
+        ),
+        (
+            vec![
+                "--frames".into(),
+                "2".into(),
+                "--move-light".into(),
+                "0:1,2,3".into(),
+            ],
+            "no analytic light 0",
+            1,
+        ),
+        (
+            vec![
+                "--frames".into(),
+                "2".into(),
+                "--light".into(),
+                "point:0,0.5,0:1,1,1".into(),
+                "--move-light".into(),
+                "3:1,2,3".into(),
+            ],
+            "--move-light: no analytic light 3: the scene has 1 (numbered from 0: 0 point)",
+            1,
+        ),
+        (
+            vec![
+                "--frames".into(),
+                "2".into(),
+                "--sky".into(),
+                "1,1,1".into(),
+                "--move-light".into(),
+                "0:1,2,3".into(),
+            ],
+            "sky",
+            1,
+        ),
+        (
+            vec![
+                "--frames".into(),
+                "2".into(),
+                "--move-light".into(),
+                "zero:1,2,3".into(),
+            ],
+            "--move-light",
+            2,
+        ),
+        (
+            vec![
+                "--frames".into(),
+                "2".into(),
+                "--scale-light".into(),
+                "0:-1".into(),
+            ],
+            "--scale-light",
+            2,
+        ),
+        (
+            vec![
+                "--frames".into(),
+                "2".into(),
+                "--light".into(),
+                "point:0,0.5,0:1,1,1".into(),
+                "--bands".into(),
+                "2".into(),
+            ],
+            "--bands",
+            1,
+        ),
     ];
     for (extra, needle, code) in cases {
         let mut args = base(&scene, &out);

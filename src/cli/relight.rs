@@ -5,14 +5,17 @@ use antiradiance::error::{Error, Result};
 use antiradiance::memory;
 use antiradiance::output::render::{self, CameraOptions, Shading};
 use antiradiance::progress::Progress;
-use antiradiance::solve::relight::{emitter_centroids, frame_path, sweep_weights, Relighter};
-use antiradiance::solve::solution::sanitize;
+use antiradiance::solve::relight::{
+    animated_light, check_light_changes, emitter_centroids, frame_path, light_phase, sweep_weights,
+    LightChange, Relighter,
+};
+use antiradiance::solve::solution::{error_against, sanitize};
 use clap::Args;
 use glam::DVec3;
 use serde::Serialize;
 use serde_json::json;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// The camera of the frames.
 #[derive(Args, Clone, Debug)]
@@ -69,9 +72,45 @@ pub struct RelightArgs {
     pub scene: SceneArgs,
     #[command(flatten)]
     pub solver_args: SolverArgs,
-    /// Number of frames (1..=10000): a bright spot sweeps across the emitting triangles.
+    /// Number of frames (1..=10000): a bright spot sweeps across the emitting triangles, and
+    /// the analytic lights move and change as --move-light and --scale-light say.
     #[arg(long, value_name = "N", help_heading = "Animation options")]
     pub frames: usize,
+    /// Analytic light I (0-based, in the order of the scene's lights, then --light, then
+    /// --sky) moves in a straight line from where it is to X,Y,Z over the frames (a point or
+    /// spot light: its position; a sun: the direction its light travels). Repeatable.
+    #[arg(long = "move-light", value_name = "I:X,Y,Z", value_parser = parse_move_light, allow_hyphen_values = true, help_heading = "Animation options")]
+    pub move_light: Vec<LightChange>,
+    /// Analytic light I's colour goes from its own to F times it over the frames (F = 0.25
+    /// dims it to a quarter). Repeatable.
+    #[arg(long = "scale-light", value_name = "I:F", value_parser = parse_scale_light, allow_hyphen_values = true, help_heading = "Animation options")]
+    pub scale_light: Vec<LightChange>,
+    /// The last H frames keep the lighting the animation reached (0..frames): with
+    /// --frame-budget they show the progressive solve converging.
+    #[arg(
+        long,
+        value_name = "H",
+        default_value_t = 0,
+        help_heading = "Animation options"
+    )]
+    pub hold: usize,
+    /// Progressive relighting: each frame does as many sweeps as fit MS milliseconds (at least
+    /// one) and the next frame goes on from there, so the answer converges over frames; the
+    /// scene's own lighting is solved to the tolerance once before the first frame. Without
+    /// it, every frame is solved to the tolerance. 0..=60000.
+    #[arg(
+        long,
+        value_name = "MS",
+        allow_negative_numbers = true,
+        conflicts_with = "bands",
+        help_heading = "Animation options"
+    )]
+    pub frame_budget: Option<f64>,
+    /// Also solve every frame's lighting from scratch to a tenth of the tolerance and report
+    /// the relight's error against it (the design note's measure; not counted in the frame's
+    /// time).
+    #[arg(long, help_heading = "Animation options")]
+    pub errors: bool,
     /// Fraction of its own emission an emitter keeps far from the spot, in [0, 1].
     #[arg(
         long,
@@ -111,6 +150,53 @@ pub const MAX_BANDS: usize = 256;
 /// Largest `--frames` (frame names have four digits).
 pub const MAX_FRAMES: usize = 10_000;
 
+/// Largest `--frame-budget`, milliseconds.
+pub const MAX_FRAME_BUDGET_MS: f64 = 60_000.0;
+
+/// Parses `--move-light I:X,Y,Z`.
+fn parse_move_light(text: &str) -> std::result::Result<LightChange, String> {
+    let (index, to) = text
+        .split_once(':')
+        .ok_or_else(|| format!("'{text}' is not I:X,Y,Z"))?;
+    Ok(LightChange::MoveTo {
+        light: parse_index(index, text)?,
+        to: driver::parse_point(to)?,
+    })
+}
+
+/// Parses `--scale-light I:F`.
+fn parse_scale_light(text: &str) -> std::result::Result<LightChange, String> {
+    let (index, factor) = text
+        .split_once(':')
+        .ok_or_else(|| format!("'{text}' is not I:F"))?;
+    let factor: f64 = factor
+        .trim()
+        .parse()
+        .ok()
+        .filter(|f: &f64| f.is_finite() && *f >= 0.0)
+        .ok_or_else(|| format!("'{factor}' in '{text}' is not a finite factor >= 0"))?;
+    Ok(LightChange::Scale {
+        light: parse_index(index, text)?,
+        factor,
+    })
+}
+
+/// The light index of a light change.
+fn parse_index(index: &str, text: &str) -> std::result::Result<usize, String> {
+    index
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{index}' in '{text}' is not a light index (0, 1, ...)"))
+}
+
+/// A light change as the command line gives it.
+fn change_text(change: &LightChange) -> String {
+    match *change {
+        LightChange::MoveTo { light, to } => format!("{light}:{},{},{}", to.x, to.y, to.z),
+        LightChange::Scale { light, factor } => format!("{light}:{factor}"),
+    }
+}
+
 /// One frame of `relight`, as it appears in the report.
 #[derive(Clone, Debug, Serialize)]
 pub struct FrameRecord {
@@ -120,7 +206,10 @@ pub struct FrameRecord {
     pub seconds: f64,
     /// Seconds to render and write the picture.
     pub render_seconds: f64,
-    /// Jacobi sweeps of the relight.
+    /// Of `seconds`, those spent on the shadow rays of analytic lights that moved.
+    pub direct_seconds: f64,
+    /// Jacobi sweeps of the relight (0 when the lighting did not change since a converged
+    /// one).
     pub iterations: usize,
     /// Final residual.
     pub residual: f64,
@@ -131,6 +220,9 @@ pub struct FrameRecord {
     /// Total emitted power of the frame relative to the scene's own emission (sum of a_t E_t,
     /// mean over RGB), in [dim, 1].
     pub relative_power: f64,
+    /// With `--errors`: the design note's error of the relight against the frame's lighting
+    /// solved from scratch to a tenth of the tolerance.
+    pub error_vs_converged: Option<f64>,
 }
 
 /// Timing figures over the frames of a `relight` run, seconds.
@@ -146,6 +238,11 @@ pub struct FrameSummary {
     pub max_seconds: f64,
     /// Mean iterations per relight.
     pub mean_iterations: f64,
+    /// Frames whose relight reached the tolerance.
+    pub converged_frames: usize,
+    /// With `--errors`: mean and largest error against the converged answer.
+    pub mean_error: Option<f64>,
+    pub max_error: Option<f64>,
 }
 
 impl FrameSummary {
@@ -160,6 +257,7 @@ impl FrameSummary {
             .filter(|f| f.warm_started)
             .map(|f| f.seconds)
             .collect();
+        let errors: Option<Vec<f64>> = frames.iter().map(|f| f.error_vs_converged).collect();
         FrameSummary {
             mean_seconds: frames.iter().map(|f| f.seconds).sum::<f64>() / n,
             mean_warm_seconds: (!warm.is_empty())
@@ -170,6 +268,13 @@ impl FrameSummary {
                 .fold(f64::INFINITY, f64::min),
             max_seconds: frames.iter().map(|f| f.seconds).fold(0.0, f64::max),
             mean_iterations: frames.iter().map(|f| f.iterations as f64).sum::<f64>() / n,
+            converged_frames: frames.iter().filter(|f| f.converged).count(),
+            mean_error: errors
+                .as_ref()
+                .map(|e| e.iter().sum::<f64>() / e.len() as f64),
+            max_error: errors
+                .as_ref()
+                .map(|e| e.iter().copied().fold(0.0, f64::max)),
         }
     }
 }
@@ -205,8 +310,11 @@ fn check_out_dir(dir: &Path) -> Result<()> {
 /// time per relight) and writes the report when asked.
 ///
 /// Errors (one line each, nothing solved): bad scene, solver or picture parameter, `--frames`
-/// outside 1..=[`MAX_FRAMES`], `--dim` outside [0, 1], `--out` not a directory or its parent
-/// missing, a bad `--report` path, a scene without emitters; a failed write names its file.
+/// outside 1..=[`MAX_FRAMES`], `--dim` outside [0, 1], `--hold` not below `--frames`,
+/// `--frame-budget` outside [0, [`MAX_FRAME_BUDGET_MS`]], `--out` not a directory or its parent
+/// missing, a bad `--report` path, a light change naming no light of the scene (or moving a
+/// sky), `--bands` with lit analytic lights or light changes, a scene with nothing to animate;
+/// a failed write names its file.
 pub fn relight(args: &RelightArgs) -> Result<()> {
     let start = Instant::now();
     let mut timings = Timings::default();
@@ -230,6 +338,34 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
             args.dim
         )));
     }
+    if args.hold >= args.frames {
+        return Err(Error::Parameter(format!(
+            "--hold {} must be below --frames {} (at least one frame moves the lights)",
+            args.hold, args.frames
+        )));
+    }
+    let frame_budget = match args.frame_budget {
+        Some(ms) if (0.0..=MAX_FRAME_BUDGET_MS).contains(&ms) => {
+            Some(Duration::from_secs_f64(ms / 1e3))
+        }
+        Some(ms) => {
+            return Err(Error::Parameter(format!(
+                "--frame-budget {ms} outside [0, {MAX_FRAME_BUDGET_MS}] milliseconds"
+            )))
+        }
+        None => None,
+    };
+    let changes: Vec<LightChange> = args
+        .move_light
+        .iter()
+        .chain(&args.scale_light)
+        .copied()
+        .collect();
+    if args.bands > 0 && !changes.is_empty() {
+        return Err(Error::Parameter(
+            "--bands mixes precomputed emission lights; it does not animate analytic lights (--move-light, --scale-light)".into(),
+        ));
+    }
     let camera = args.camera.camera();
     driver::check_camera(&camera)?;
     check_out_dir(&args.out)?;
@@ -242,12 +378,37 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
 
     let loaded = driver::load(&args.scene, &mut timings)?;
     let (emitters, centroids) = emitter_centroids(&loaded.scene);
-    if emitters.is_empty() {
+    check_light_changes(&loaded.scene.lights, &changes).map_err(|e| {
+        let flag = if args.move_light.is_empty() {
+            "--scale-light"
+        } else if args.scale_light.is_empty() {
+            "--move-light"
+        } else {
+            "--move-light/--scale-light"
+        };
+        let message = match e {
+            Error::Parameter(m) => m,
+            other => other.to_string(),
+        };
+        Error::Parameter(format!("{flag}: {message}"))
+    })?;
+    if emitters.is_empty() && changes.is_empty() {
         return Err(Error::Scene {
             path: args.scene.scene.clone(),
-            message: "no emitting triangle to animate (give a material Ke, or use --emit-above)"
+            message: "no emitting triangle to animate (give a material Ke, or use --emit-above) and no analytic light to move or scale (--move-light, --scale-light)"
                 .into(),
         });
+    }
+    if emitters.is_empty() && args.bands > 0 {
+        return Err(Error::Scene {
+            path: args.scene.scene.clone(),
+            message: "--bands: no emitting triangle to cut into bands".into(),
+        });
+    }
+    if args.bands > 0 && loaded.scene.lights.iter().any(|l| l.strength() > 0.0) {
+        return Err(Error::Parameter(
+            "--bands mixes precomputed emission lights, and the scene has lit analytic lights (point, spot, sun, sky); relight without --bands".into(),
+        ));
     }
     let mut relighter = driver::timed(&mut timings.build, || {
         Relighter::from_patches(&loaded.scene, loaded.patches.clone(), &options)
@@ -291,15 +452,41 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
         None
     };
     let lights_seconds = lights_start.elapsed().as_secs_f64();
+    // Progressive: the scene's own lighting converged once, then each frame within its budget.
+    let initial_seconds = match frame_budget {
+        Some(_) => {
+            let initial = relighter.solve(&Progress::hidden());
+            initial
+                .solution
+                .stats
+                .check("hierarchical")
+                .map_err(|e| Error::Solve(format!("the initial solve: {e}")))?;
+            relighter.frame_budget = frame_budget;
+            Some(initial.seconds)
+        }
+        None => None,
+    };
+    let base_lights = loaded.scene.lights.clone();
+    let animated = args.frames - args.hold;
     let progress = Progress::new("relight", args.frames as u64, !args.quiet);
     let mut records = Vec::with_capacity(args.frames);
     for frame in 0..args.frames {
+        // The last `hold` frames keep the animation's last lighting.
+        let step = frame.min(animated - 1);
         let (relit, emission) = match &bands {
             None => {
-                let weights = sweep_weights(&centroids, frame, args.frames, args.dim);
                 let mut emission = base.clone();
-                for (&t, w) in emitters.iter().zip(&weights) {
-                    emission[t] = base[t].map(|x| x * w);
+                if !emitters.is_empty() {
+                    let weights = sweep_weights(&centroids, step, animated, args.dim);
+                    for (&t, w) in emitters.iter().zip(&weights) {
+                        emission[t] = base[t].map(|x| x * w);
+                    }
+                }
+                let t = light_phase(step, animated);
+                for change in &changes {
+                    let k = change.light();
+                    relighter
+                        .set_analytic_light(k, animated_light(&base_lights[k], k, &changes, t))?;
                 }
                 (relighter.relight(&emission)?, emission)
             }
@@ -308,7 +495,7 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
                 // emitters (the centres are inside it).
                 let mut points = centres.clone();
                 points.extend(&centroids);
-                let weights = sweep_weights(&points, frame, args.frames, args.dim);
+                let weights = sweep_weights(&points, step, animated, args.dim);
                 let intensities: Vec<[f64; 3]> =
                     weights[..centres.len()].iter().map(|&w| [w; 3]).collect();
                 let relit = relighter.mix(&intensities)?;
@@ -322,6 +509,21 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
             .stats
             .check("hierarchical")
             .map_err(|e| Error::Solve(format!("frame {frame}: {e}")))?;
+        let error_vs_converged = if args.errors {
+            let reference = relighter.converged(&Progress::hidden());
+            reference
+                .solution
+                .stats
+                .check("hierarchical")
+                .map_err(|e| Error::Solve(format!("frame {frame}, the converged solve: {e}")))?;
+            Some(sanitize(error_against(
+                &loaded.scene,
+                &relit.solution,
+                &reference.solution,
+            )))
+        } else {
+            None
+        };
         if camera.exposure.is_none() {
             camera.exposure = Some(render::auto_exposure(relighter.patches(), &relit.solution));
         }
@@ -339,6 +541,7 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
         records.push(FrameRecord {
             frame,
             seconds: relit.seconds,
+            direct_seconds: relit.direct_seconds,
             render_seconds,
             iterations: stats.iterations,
             residual: sanitize(stats.residual),
@@ -349,6 +552,7 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
             } else {
                 0.0
             },
+            error_vs_converged,
         });
         progress.inc(1);
         progress.message(format!("{:.0} ms per relight", 1e3 * relit.seconds));
@@ -371,6 +575,11 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
                     "scene_options": args.scene.to_json(),
                     "frames": args.frames,
                     "dim": args.dim,
+                    "hold": args.hold,
+                    "frame_budget_ms": args.frame_budget,
+                    "move_light": args.move_light.iter().map(change_text).collect::<Vec<_>>(),
+                    "scale_light": args.scale_light.iter().map(change_text).collect::<Vec<_>>(),
+                    "errors": args.errors,
                     "exposure": camera.exposure,
                     "eye": [eye.x, eye.y, eye.z],
                     "target": [target.x, target.y, target.z],
@@ -380,6 +589,7 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
                 }),
             )
             .insert("build_seconds", build_seconds)
+            .insert("initial_seconds", initial_seconds)
             .insert("bands", bands.as_ref().map_or(0, Vec::len))
             .insert("lights_seconds", lights_seconds)
             .insert(
@@ -403,6 +613,7 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
             args,
             build_seconds,
             bands.as_ref().map(|c| (c.len(), lights_seconds)),
+            initial_seconds,
             &summary
         )
     );
@@ -415,20 +626,32 @@ fn relight_summary(
     args: &RelightArgs,
     build_seconds: f64,
     lights: Option<(usize, f64)>,
+    initial_seconds: Option<f64>,
     summary: &FrameSummary,
 ) -> String {
-    let build = match lights {
-        Some((k, s)) => {
+    let build = match (lights, initial_seconds, args.frame_budget) {
+        (Some((k, s)), _, _) => {
             format!("build {build_seconds:.2} s and {k} band lights in {s:.2} s once, then mixed")
         }
-        None => format!("build {build_seconds:.2} s once, then"),
+        (None, Some(initial), Some(ms)) => format!(
+            "build {build_seconds:.2} s and the initial solve {initial:.2} s once, then progressive within {ms} ms per frame:"
+        ),
+        _ => format!("build {build_seconds:.2} s once, then"),
+    };
+    let errors = match (summary.mean_error, summary.max_error) {
+        (Some(mean), Some(max)) => format!(
+            "; error against the converged answer {:.3}% on average, {:.3}% at most",
+            100.0 * mean,
+            100.0 * max
+        ),
+        _ => String::new(),
     };
     let warm = match summary.mean_warm_seconds {
         Some(s) => format!(", {:.1} ms per warm-started relight", 1e3 * s),
         None => String::new(),
     };
     format!(
-        "Relit {} ({} triangles, {} patches) over {} frames: {build} {:.1} ms per relight on average{warm} (min {:.1} ms, max {:.1} ms, {:.1} iterations); frames in {}.",
+        "Relit {} ({} triangles, {} patches) over {} frames: {build} {:.1} ms per relight on average{warm} (min {:.1} ms, max {:.1} ms, {:.1} iterations, {} frames converged){errors}; frames in {}.",
         args.scene.scene.display(),
         loaded.scene.len(),
         loaded.patches.len(),
@@ -437,6 +660,7 @@ fn relight_summary(
         1e3 * summary.min_seconds,
         1e3 * summary.max_seconds,
         summary.mean_iterations,
+        summary.converged_frames,
         args.out.display()
     )
 }
