@@ -96,8 +96,8 @@ pub struct RelightArgs {
     pub hold: usize,
     /// Progressive relighting: each frame does as many sweeps as fit MS milliseconds (at least
     /// one) and the next frame goes on from there, so the answer converges over frames; the
-    /// scene's own lighting is solved to the tolerance once before the first frame. Without
-    /// it, every frame is solved to the tolerance. 0..=60000.
+    /// first frame's lighting is solved to the tolerance once before the frames. Without it,
+    /// every frame is solved to the tolerance. 0..=60000.
     #[arg(
         long,
         value_name = "MS",
@@ -452,9 +452,30 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
         None
     };
     let lights_seconds = lights_start.elapsed().as_secs_f64();
-    // Progressive: the scene's own lighting converged once, then each frame within its budget.
+    let base_lights = loaded.scene.lights.clone();
+    let animated = args.frames - args.hold;
+    // The lighting of animation step `step`: the emitters' sweep and the lights' changes.
+    let lighting = |relighter: &mut Relighter, step: usize| -> Result<Vec<[f64; 3]>> {
+        let mut emission = base.clone();
+        if !emitters.is_empty() {
+            let weights = sweep_weights(&centroids, step, animated, args.dim);
+            for (&t, w) in emitters.iter().zip(&weights) {
+                emission[t] = base[t].map(|x| x * w);
+            }
+        }
+        let t = light_phase(step, animated);
+        for change in &changes {
+            let k = change.light();
+            relighter.set_analytic_light(k, animated_light(&base_lights[k], k, &changes, t))?;
+        }
+        relighter.set_emission(&emission)?;
+        Ok(emission)
+    };
+    // Progressive: the first frame's lighting converged once, then each frame within its
+    // budget.
     let initial_seconds = match frame_budget {
         Some(_) => {
+            lighting(&mut relighter, 0)?;
             let initial = relighter.solve(&Progress::hidden());
             initial
                 .solution
@@ -466,8 +487,6 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
         }
         None => None,
     };
-    let base_lights = loaded.scene.lights.clone();
-    let animated = args.frames - args.hold;
     let progress = Progress::new("relight", args.frames as u64, !args.quiet);
     let mut records = Vec::with_capacity(args.frames);
     for frame in 0..args.frames {
@@ -475,20 +494,8 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
         let step = frame.min(animated - 1);
         let (relit, emission) = match &bands {
             None => {
-                let mut emission = base.clone();
-                if !emitters.is_empty() {
-                    let weights = sweep_weights(&centroids, step, animated, args.dim);
-                    for (&t, w) in emitters.iter().zip(&weights) {
-                        emission[t] = base[t].map(|x| x * w);
-                    }
-                }
-                let t = light_phase(step, animated);
-                for change in &changes {
-                    let k = change.light();
-                    relighter
-                        .set_analytic_light(k, animated_light(&base_lights[k], k, &changes, t))?;
-                }
-                (relighter.relight(&emission)?, emission)
+                let emission = lighting(&mut relighter, step)?;
+                (relighter.solve(&Progress::hidden()), emission)
             }
             Some(centres) => {
                 // The spot's brightness at each band's centre, over the same span as the

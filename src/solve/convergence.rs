@@ -29,6 +29,10 @@ pub struct Convergence {
     /// accelerated iteration's residual ratios understate the plain iteration's, which is what
     /// turns a residual into an error: e = (I - T)^-1 f). The largest albedo bounds it.
     pub contraction_bound: Option<f64>,
+    /// The solve started from a solution of the same scene moved by the change of its source
+    /// (a warm-started relight): its light has bounced and its antiradiance cancels already, so
+    /// convergence may be declared from the first sweep on instead of after [`MIN_SWEEPS`].
+    pub warm: bool,
 }
 
 impl Convergence {
@@ -65,9 +69,9 @@ impl Convergence {
     /// Records the residual of sweep `iteration` (1-based); true when the solve should stop:
     /// the estimated remaining error is under `tol` and at least [`MIN_SWEEPS`] sweeps ran (the
     /// first ones only propagate emission: light must bounce once and antiradiance must have had
-    /// a sweep to cancel it).
+    /// a sweep to cancel it; from the first sweep on when [`Convergence::warm`]).
     pub fn sweep_done(&mut self, iteration: usize, residual: f64, tol: f64) -> bool {
-        self.update(residual, tol) && iteration >= MIN_SWEEPS
+        self.update(residual, tol) && (self.warm || iteration >= MIN_SWEEPS)
     }
 }
 

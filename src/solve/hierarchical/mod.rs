@@ -669,6 +669,7 @@ impl Prepared {
         // another one moves each element's radiance by the change of its source.
         let warm = warm.and_then(|w| w.to_channels::<C>(n, slots).map(|values| (w, values)));
         let matched = warm.is_some();
+        let same_source_len = warm.as_ref().is_some_and(|(w, _)| w.source.len() == n);
         let same_source = warm.as_ref().is_some_and(|(w, _)| w.source == elem_source);
         let (mut radiance, mut anti) = match warm {
             Some((w, (mut radiance, anti))) => {
@@ -710,6 +711,7 @@ impl Prepared {
             ..SolveStats::default()
         };
         let mut convergence = Convergence::default();
+        convergence.warm = matched && same_source_len;
         // The bound on B (maximum principle; not for unoccluded radiosity) and the mass the
         // sweeps' changes are measured against.
         let rho_max = albedo
