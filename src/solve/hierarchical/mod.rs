@@ -672,12 +672,21 @@ impl Prepared {
         let same_source_len = warm.as_ref().is_some_and(|(w, _)| w.source.len() == n);
         let same_source = warm.as_ref().is_some_and(|(w, _)| w.source == elem_source);
         let (mut radiance, mut anti) = match warm {
-            Some((w, (mut radiance, anti))) => {
+            Some((w, (mut radiance, mut anti))) => {
                 if !same_source && w.source.len() == n {
-                    for (b, (new, old)) in radiance.iter_mut().zip(emission.iter().zip(&w.source)) {
-                        let old = channels_of::<C>(*old);
+                    // The old state scaled per channel by the least-squares factor of the new
+                    // source against the old one (exact when every light changed by one factor),
+                    // then moved by what that leaves of the change.
+                    let old: Vec<[f64; C]> = w.source.iter().map(|&s| channels_of(s)).collect();
+                    let k = source_factor(&emission, &old, &self.elem_area);
+                    for (b, (new, old)) in radiance.iter_mut().zip(emission.iter().zip(&old)) {
                         for c in 0..C {
-                            b[c] += new[c] - old[c];
+                            b[c] = k[c] * b[c] + new[c] - k[c] * old[c];
+                        }
+                    }
+                    for a in anti.iter_mut() {
+                        for c in 0..C {
+                            a[c] = (k[c] * a[c] as f64) as f32;
                         }
                     }
                 }
@@ -1065,6 +1074,27 @@ impl Prepared {
         };
         (solution, state)
     }
+}
+
+/// Per channel, the factor `k` that brings `old` closest to `new` (least squares, area
+/// weighted): `sum a new old / sum a old^2`; 1 where `old` is 0 or the sums are not finite.
+/// Sums in f64.
+fn source_factor<const C: usize>(new: &[[f64; C]], old: &[[f64; C]], area: &[f64]) -> [f64; C] {
+    let (mut dot, mut norm) = ([0.0f64; C], [0.0f64; C]);
+    for ((n, o), &a) in new.iter().zip(old).zip(area) {
+        for c in 0..C {
+            dot[c] += a * n[c] * o[c];
+            norm[c] += a * o[c] * o[c];
+        }
+    }
+    std::array::from_fn(|c| {
+        let k = dot[c] / norm[c];
+        if norm[c] > 0.0 && k.is_finite() {
+            k
+        } else {
+            1.0
+        }
+    })
 }
 
 /// Entries of the flat state (radiance, then antiradiance slots) of `n` elements and `slots`
