@@ -1,7 +1,18 @@
-//! Time per relight: one warm-started re-solve of a prepared scene after its lights changed by
-//! one step of a 30-frame sweep (the animation of `antiradiance relight`, emitters away from the
-//! spot at 10%), at the default and the fast preset. Tree and links are built once, outside the
-//! measurement.
+//! Time per relight of a prepared scene (tree and links are built once, outside the
+//! measurement), each a warm-started re-solve:
+//!
+//! - `*_sweep_step`: the lights changed by one step of a 30-frame sweep (the animation of
+//!   `antiradiance relight`, emitters away from the spot at 10%), to the tolerance, at the
+//!   default and the fast preset;
+//! - `default_preset_arbitrary_change`: every emitter to its own random brightness in
+//!   [0.2, 1.2] of its own (a new draw each relight: no mix of precomputed lights), to the
+//!   tolerance;
+//! - `default_preset_progressive_100ms`: the same changes, one progressive frame each
+//!   (`Relighter::frame_budget` of 100 ms: the sweeps that fit);
+//! - `default_preset_point_light_move` and `..._dim`: a point light added to the scene moved
+//!   between two places (its shadow rays traced again) or dimmed to half and back (no shadow
+//!   ray), to the tolerance;
+//! - `*_mix_K_lights`: a mix of K precomputed band lights (no sweep).
 //!
 //! Scene: the seed room (`../shared/meshes/room_radiosity_small.obj`, `--emit-above 3.65
 //! --albedo 0.75`) when present, otherwise a generated Cornell box of similar size (10,350
@@ -12,6 +23,10 @@
 use std::path::Path;
 use std::time::Duration;
 
+use antiradiance::scene::lights::Light;
+use glam::DVec3;
+
+use antiradiance::progress::Progress;
 use antiradiance::scene::generated;
 use antiradiance::scene::{load_obj, Scene, SceneOptions};
 use antiradiance::solve::relight::{emitter_centroids, sweep_weights, Relighter};
@@ -57,6 +72,107 @@ fn sweep_emission(scene: &Scene, frame: usize) -> Vec<[f64; 3]> {
         emission[t] = scene.emission[t].map(|x| x * w);
     }
     emission
+}
+
+/// The scene's emission with every emitter scaled by its own factor in [0.2, 1.2], drawn from
+/// `seed` (a deterministic stream).
+fn random_emission(scene: &Scene, seed: u64) -> Vec<[f64; 3]> {
+    let mut state = seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1;
+    let mut emission = scene.emission.clone();
+    for (t, e) in emission.iter_mut().enumerate() {
+        if scene.is_emitter(t) {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            let f = 0.2 + (state >> 11) as f64 / (1u64 << 53) as f64;
+            *e = e.map(|x| x * f);
+        }
+    }
+    emission
+}
+
+/// The room's point light (scene units: the room spans about 19 x 9 x 16) at its two places.
+fn point_light(at: usize) -> Light {
+    let position = [DVec3::new(2.0, 2.0, 1.0), DVec3::new(-3.0, 2.5, -2.0)][at];
+    Light::Point {
+        position,
+        intensity: [20.0; 3],
+    }
+}
+
+/// The relights of arbitrary changes, progressive frames and a moving or dimmed point light,
+/// at the default preset.
+fn arbitrary(c: &mut Criterion, name: &str, scene: &Scene) {
+    let mut group = c.benchmark_group(format!("relight/{name}/{}", scene.len()));
+    group.sample_size(10);
+    group.warm_up_time(Duration::from_secs(1));
+    group.measurement_time(Duration::from_secs(20));
+    let options = SolverOptions::default_preset();
+    let Ok(mut relighter) = Relighter::new(scene, None, &options) else {
+        eprintln!("skipping the arbitrary changes: the relighter cannot be built");
+        return;
+    };
+    relighter.solve(&Progress::hidden());
+    let mut seed = 1;
+    group.bench_function("default_preset_arbitrary_change", |b| {
+        b.iter(|| {
+            seed += 1;
+            let relit = relighter
+                .relight(&random_emission(scene, seed))
+                .expect("valid emission");
+            relit.solution.stats.iterations
+        })
+    });
+    relighter.frame_budget = Some(Duration::from_millis(100));
+    group.bench_function("default_preset_progressive_100ms", |b| {
+        b.iter(|| {
+            seed += 1;
+            let relit = relighter
+                .relight(&random_emission(scene, seed))
+                .expect("valid emission");
+            relit.solution.stats.iterations
+        })
+    });
+    drop(relighter);
+
+    let mut lit = scene.clone();
+    lit.lights.push(point_light(0));
+    let Ok(mut relighter) = Relighter::new(&lit, None, &options) else {
+        eprintln!("skipping the point light: the relighter cannot be built");
+        return;
+    };
+    relighter.solve(&Progress::hidden());
+    let mut at = 0;
+    group.bench_function("default_preset_point_light_move", |b| {
+        b.iter(|| {
+            at = 1 - at;
+            relighter
+                .set_analytic_light(0, point_light(at))
+                .expect("valid light");
+            relighter
+                .solve(&Progress::hidden())
+                .solution
+                .stats
+                .iterations
+        })
+    });
+    let mut half = false;
+    group.bench_function("default_preset_point_light_dim", |b| {
+        b.iter(|| {
+            half = !half;
+            let k = if half { 0.5 } else { 1.0 };
+            let light = point_light(at);
+            relighter
+                .set_analytic_light(0, light.with_colour(light.colour().map(|x| x * k)))
+                .expect("valid light");
+            relighter
+                .solve(&Progress::hidden())
+                .solution
+                .stats
+                .iterations
+        })
+    });
+    group.finish();
 }
 
 fn relight(c: &mut Criterion) {
@@ -128,6 +244,7 @@ fn relight(c: &mut Criterion) {
         );
     }
     group.finish();
+    arbitrary(c, &name, &scene);
 }
 
 criterion_group!(benches, relight);
