@@ -114,7 +114,8 @@ pub fn solve(scene: &Scene, max_edge: Option<f64>, options: &SolverOptions) -> R
     })
 }
 
-/// A [`Relighter`] for `scene`: tree and links built once, re-solved for new emission.
+/// A [`Relighter`] for `scene`: tree and links built once, re-solved for new emission and moved
+/// or recoloured analytic lights, to the tolerance or progressively within a time per frame.
 pub fn relight(scene: &Scene, max_edge: Option<f64>, options: &SolverOptions) -> Result<Relighter> {
     Relighter::new(scene, max_edge, options)
 }
