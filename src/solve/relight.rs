@@ -8,7 +8,7 @@
 //! each element moved by the change of its own source, and with the previous solve's Anderson
 //! history: its differences of sweeps do not depend on the source, so the slow modes it found
 //! (the overall light level of a closed room) are removed from the first sweep on. On the seed
-//! room a random change of every emitter's brightness is within 0.2–0.5% of the converged answer
+//! room a random change of every emitter's brightness is within 0.3–0.6% of the converged answer
 //! after one sweep, and a relight to the tolerance takes 2–3 sweeps where a cold solve takes 7–9
 //! (docs/performance.md).
 //!
