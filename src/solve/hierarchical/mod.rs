@@ -69,6 +69,8 @@ pub struct Prepared {
     live: LiveBins,
     /// Cached geometric factors of the (element, cluster link) pairs, when they fit the budget.
     pairs: Option<PairCache>,
+    /// What one sweep evaluates ([`Prepared::sweep_work`]).
+    work: (u64, u64),
     /// True when every albedo is grey (a grey source is then solved in one channel).
     albedo_grey: bool,
     /// True when the scene is a convex enclosure ([`model::is_convex_enclosure`]).
@@ -315,6 +317,7 @@ impl Prepared {
             groups: SenderGroups::default(),
             live: LiveBins::default(),
             pairs: None,
+            work: (0, 0),
             albedo_grey: true,
             convex: false,
             use_anti: options.antiradiance,
@@ -349,6 +352,7 @@ impl Prepared {
             &prepared.elem_normal,
             &prepared.elem_back,
         );
+        prepared.work = prepared.count_sweep_work();
         // Model only what the scene needs: grey albedos allow one-channel solves; a convex
         // enclosure needs no antiradiance; each element stores only the bins links use.
         prepared.albedo_grey = prepared.elem_albedo.iter().all(|&a| model::is_grey(a));
@@ -438,21 +442,18 @@ impl Prepared {
     }
 
     /// Per sweep: (element, cluster link) pairs the gather evaluates and terms the pull sums
-    /// ([`SolveStats::element_link_pairs`], [`SolveStats::pull_terms`]).
+    /// ([`SolveStats::element_link_pairs`], [`SolveStats::pull_terms`]), counted once when the
+    /// model is built.
     pub fn sweep_work(&self) -> (u64, u64) {
+        self.work
+    }
+
+    /// Counts [`Prepared::sweep_work`] (tree, links and sender groups built).
+    fn count_sweep_work(&self) -> (u64, u64) {
         let (tree, links) = (&self.tree, &self.links);
-        let node_links =
-            |i: u32| (links.cluster_start[i as usize + 1] - links.cluster_start[i as usize]) as u64;
         let pairs = (0..self.element_count())
             .into_par_iter()
-            .map(|e| {
-                let (mut total, mut node) = (0u64, tree.elements[e]);
-                while node != NONE {
-                    total += node_links(node);
-                    node = tree.nodes[node as usize].parent;
-                }
-                total
-            })
+            .map(|e| links_into_ancestors(tree, links, e) as u64)
             .sum();
         let pull = links
             .cluster
@@ -1143,6 +1144,19 @@ pub fn solve_hierarchical(
 ) -> Result<Solution> {
     let mut prepared = Prepared::new(patches, options, false)?;
     Ok(prepared.solve(patches, progress).0)
+}
+
+/// Cluster links into element `e` and into each of its ancestors: the (element, link) pairs
+/// of `e` in a sweep's gather.
+fn links_into_ancestors(tree: &ClusterTree, links: &Links, e: usize) -> usize {
+    let mut total = 0;
+    let mut node = tree.elements[e];
+    while node != NONE {
+        total +=
+            (links.cluster_start[node as usize + 1] - links.cluster_start[node as usize]) as usize;
+        node = tree.nodes[node as usize].parent;
+    }
+    total
 }
 
 /// Most memory the Anderson history may take; above it the solver extrapolates the tail instead.

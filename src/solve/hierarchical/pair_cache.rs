@@ -38,17 +38,10 @@ impl PairCache {
     pub(super) fn build(prepared: &Prepared, budget: u64) -> std::result::Result<PairCache, u64> {
         let (tree, links) = (&prepared.tree, &prepared.links);
         let n = prepared.element_count();
-        let count = |e: usize| {
-            let mut total = 0usize;
-            let mut node = tree.elements[e];
-            while node != NONE {
-                total += (links.cluster_start[node as usize + 1]
-                    - links.cluster_start[node as usize]) as usize;
-                node = tree.nodes[node as usize].parent;
-            }
-            total
-        };
-        let counts: Vec<usize> = (0..n).into_par_iter().map(count).collect();
+        let counts: Vec<usize> = (0..n)
+            .into_par_iter()
+            .map(|e| links_into_ancestors(tree, links, e))
+            .collect();
         let total: usize = counts.iter().sum();
         let bytes = (total * std::mem::size_of::<[f32; 2]>() + (n + 1) * 8) as u64;
         if bytes > budget {
