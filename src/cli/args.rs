@@ -54,6 +54,13 @@ pub struct SceneArgs {
     /// A uniform sky of radiance R,G,B (W/(m^2 sr)) in every direction nothing blocks.
     #[arg(long, value_name = "R,G,B", value_parser = lights::parse_sky)]
     pub sky: Option<Light>,
+    /// Every surface is two-sided: both faces of each triangle emit and reflect, each with its
+    /// own radiance (the CSV adds back_r,back_g,back_b), and block light arriving at either.
+    #[arg(long)]
+    pub two_sided: bool,
+    /// The triangles of material NAME are two-sided (repeatable; see --two-sided).
+    #[arg(long = "two-sided-material", value_name = "NAME")]
+    pub two_sided_materials: Vec<String>,
 }
 
 impl SceneArgs {
@@ -88,6 +95,8 @@ impl SceneArgs {
             "max_edge": self.max_edge,
             "lights": self.lights.len(),
             "sky": self.sky.is_some(),
+            "two_sided": self.two_sided,
+            "two_sided_materials": self.two_sided_materials,
         })
     }
 }

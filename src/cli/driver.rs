@@ -134,6 +134,12 @@ pub fn load(args: &SceneArgs, timings: &mut Timings) -> Result<Loaded> {
     scene
         .lights
         .extend(args.lights.iter().chain(&args.sky).copied());
+    if args.two_sided {
+        scene.set_two_sided();
+    }
+    for name in &args.two_sided_materials {
+        scene.set_two_sided_material(name)?;
+    }
     for w in &scene.warnings {
         print_warning(w);
     }

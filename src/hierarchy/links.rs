@@ -128,6 +128,9 @@ pub struct Links {
     pub exact_entries: Vec<Entry>,
     /// For each element, its incoming exact links: `exact_start[e]..exact_start[e+1]`.
     pub exact_start: Vec<u32>,
+    /// Faces of each exact link ([`EXACT_SENDER_BACK`], [`EXACT_RECEIVER_BACK`]): empty when no
+    /// element is two-sided (every link then joins the sender's front to the receiver's front).
+    pub exact_side: Vec<u8>,
     /// Pairs of nodes found to exchange nothing (kept only when `record_culled` was asked).
     pub culled: Vec<(u32, u32)>,
     /// What refinement did (counts and times), for reports and profiling.
@@ -166,7 +169,24 @@ pub struct LinkStats {
     pub assemble_seconds: f64,
 }
 
+/// [`Links::exact_side`] bit: the link carries the sender's back face's radiance (its entries'
+/// `f_b` and `o_b`; their antiradiance weights are in the front link).
+pub const EXACT_SENDER_BACK: u8 = 1;
+/// [`Links::exact_side`] bit: the link lights the receiver's back face (its entries' `f_b` and
+/// `f_a`; the receiver's antiradiance is gathered by its front links).
+pub const EXACT_RECEIVER_BACK: u8 = 2;
+
 impl Links {
+    /// The faces exact link `l` joins: (sender's back, receiver's back).
+    #[inline]
+    pub fn exact_faces_of(&self, l: usize) -> (bool, bool) {
+        let side = self.exact_side.get(l).copied().unwrap_or(0);
+        (
+            side & EXACT_SENDER_BACK != 0,
+            side & EXACT_RECEIVER_BACK != 0,
+        )
+    }
+
     /// The coupling entries of exact link `l`.
     ///
     /// # Panics
@@ -193,7 +213,8 @@ impl Links {
             + self.point.len() * std::mem::size_of::<NodePoint>()
             + self.exact_sender.len() * 8
             + self.exact_entries.len() * std::mem::size_of::<Entry>()
-            + self.exact_start.len() * 4) as u64
+            + self.exact_start.len() * 4
+            + self.exact_side.len()) as u64
     }
 }
 
@@ -707,12 +728,74 @@ pub fn refine(
     #[derive(Default)]
     struct Row {
         senders: Vec<u32>,
+        sides: Vec<u8>,
         counts: Vec<u32>,
         entries: Vec<Entry>,
         empty: Vec<u32>,
         q: usize,
         points: u64,
     }
+    impl Row {
+        /// Appends the link from sender `s` (faces `side`) with entries `entries`, unless empty.
+        fn push(&mut self, s: u32, side: u8, entries: &[Entry]) {
+            if entries.is_empty() {
+                return;
+            }
+            self.senders.push(s);
+            self.sides.push(side);
+            self.counts.push(entries.len() as u32);
+            self.entries.extend_from_slice(entries);
+        }
+    }
+    /// The links of the faces other than front to front, for a pair where the receiver or the
+    /// sender is two-sided: the sender's back (its B seen by the receiver points behind it:
+    /// `f_b`, `o_b` of the flipped sender), the receiver's back (what its back face gathers:
+    /// `f_b`, `f_a` of the flipped receiver), and both backs. The antiradiance weights the front
+    /// link already holds are left out of the others.
+    fn faces_coupled(
+        (receiver, receiver_back): (&Receiver, Option<&Receiver>),
+        (s, sender, sender_two_sided): (u32, &PatchGeom, bool),
+        bins: &Bins,
+        coupling: &CouplingParams,
+        scratch: &mut Coupling,
+        row: &mut Row,
+    ) {
+        let flipped = sender_two_sided.then(|| sender.flipped());
+        let keep = |scratch: &mut Coupling, radiance_only: bool, antiradiance_out: bool| {
+            for e in scratch.iter_mut() {
+                if radiance_only {
+                    e.f_a = 0.0;
+                    e.o_a = 0.0;
+                }
+                if !antiradiance_out {
+                    e.o_b = 0.0;
+                    e.o_a = 0.0;
+                }
+            }
+            scratch.retain(|e| e.f_b != 0.0 || e.f_a != 0.0 || e.o_b != 0.0 || e.o_a != 0.0);
+        };
+        if let Some(back) = &flipped {
+            couple(receiver, back, bins, coupling, scratch);
+            keep(scratch, true, true);
+            row.push(s, EXACT_SENDER_BACK, scratch);
+        }
+        if let Some(r_back) = receiver_back {
+            couple(r_back, sender, bins, coupling, scratch);
+            keep(scratch, false, false);
+            row.push(s, EXACT_RECEIVER_BACK, scratch);
+            if let Some(back) = &flipped {
+                couple(r_back, back, bins, coupling, scratch);
+                keep(scratch, true, false);
+                row.push(s, EXACT_SENDER_BACK | EXACT_RECEIVER_BACK, scratch);
+            }
+        }
+    }
+    let two_sided: Vec<bool> = tree
+        .elements
+        .iter()
+        .map(|&node| tree.nodes[node as usize].two_sided)
+        .collect();
+    let any_two_sided = two_sided.iter().any(|&b| b);
     let rows: Vec<Row> = (0..n_elements)
         .into_par_iter()
         .map_init(Coupling::new, |scratch, r| {
@@ -727,16 +810,30 @@ pub fn refine(
                 coupling,
             );
             row.q = receiver.quadrature();
+            // A two-sided receiver's back face is integrated over the same points.
+            let receiver_back = two_sided[r].then(|| Receiver::new(geoms[r].flipped(), row.q));
             for &(_, s) in pairs {
                 row.points += receiver.points_for(&geoms[s as usize]) as u64;
                 couple(&receiver, &geoms[s as usize], bins, coupling, scratch);
-                if scratch.is_empty() {
+                if scratch.is_empty() && !two_sided[s as usize] && receiver_back.is_none() {
                     row.empty.push(s);
                     continue;
                 }
-                row.senders.push(s);
-                row.counts.push(scratch.len() as u32);
-                row.entries.extend_from_slice(scratch);
+                let before = row.senders.len();
+                row.push(s, 0, scratch);
+                if two_sided[r] || two_sided[s as usize] {
+                    faces_coupled(
+                        (&receiver, receiver_back.as_ref()),
+                        (s, &geoms[s as usize], two_sided[s as usize]),
+                        bins,
+                        coupling,
+                        scratch,
+                        &mut row,
+                    );
+                }
+                if row.senders.len() == before {
+                    row.empty.push(s);
+                }
             }
             meter.add(0, 0, pairs.len() as u64, row.entries.len() as u64);
             row
@@ -782,6 +879,9 @@ pub fn refine(
             links.exact_entry_start.push(start);
             links.exact_sender.push(s);
             start += count;
+        }
+        if any_two_sided {
+            links.exact_side.extend_from_slice(&row.sides);
         }
         links.exact_entries.extend_from_slice(&row.entries);
         links.exact_start[r + 1] = links.exact_start[r] + row.senders.len() as u32;

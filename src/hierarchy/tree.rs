@@ -57,6 +57,9 @@ pub struct Node {
     pub cone_cos: f64,
     /// Some triangle below blocks light arriving at its back ([`ClusterTree::mark_back_blocking`]).
     pub blocks_back: bool,
+    /// A leaf of a two-sided patch: both its faces emit and reflect
+    /// ([`ClusterTree::mark_two_sided`]; false on clusters).
+    pub two_sided: bool,
     /// Largest height of `center` above the plane of any triangle below,
     /// `max_t (n_t . center - n_t . v_t)`: with the cone it bounds from above the height of any
     /// point above every triangle's plane (see [`ClusterTree::behind_all`]).
@@ -115,6 +118,7 @@ fn leaf_node(corners: Tri, patch: u32, parent: u32, split_depth: u8) -> Node {
         cone_axis: normal,
         cone_cos: 1.0,
         blocks_back: false,
+        two_sided: false,
         height: 0.0,
     }
 }
@@ -529,11 +533,12 @@ impl ClusterTree {
         let node = &self.nodes[i as usize];
         debug_assert!(node.is_leaf());
         let (patch, depth, corners) = (node.patch, node.split_depth, node.corners);
-        let blocks_back = node.blocks_back;
+        let (blocks_back, two_sided) = (node.blocks_back, node.two_sided);
         let first = self.nodes.len() as u32;
         for piece in geometry::bisect(&corners).iter().flat_map(geometry::bisect) {
             let mut leaf = leaf_node(piece, patch, i, depth + 1);
             leaf.blocks_back = blocks_back;
+            leaf.two_sided = two_sided;
             self.nodes.push(leaf);
         }
         let node = &mut self.nodes[i as usize];
@@ -565,6 +570,15 @@ impl ClusterTree {
                     break;
                 }
             }
+        }
+    }
+
+    /// Marks the leaves of patches with `per_patch[p]` (missing entries: false) as two-sided.
+    /// Call before refinement (pieces split later inherit it); two-sided patches must block
+    /// light at their back as well ([`ClusterTree::mark_back_blocking`]).
+    pub fn mark_two_sided(&mut self, per_patch: &[bool]) {
+        for n in &mut self.nodes {
+            n.two_sided = n.is_leaf() && per_patch.get(n.patch as usize).copied().unwrap_or(false);
         }
     }
 

@@ -90,13 +90,22 @@ const SEED: u64 = 0x5eed_119a_7000_0001;
 /// so one light's share can be recomputed alone when it moves (relighting), and is the same
 /// as in the sum.
 pub fn direct_source(patches: &Patches, lights: &[Light]) -> Vec<[f64; 3]> {
+    direct_source_faces(patches, lights, false)
+}
+
+/// [`direct_source`] of the patches' front faces, or of their back faces when `back` (then
+/// one-sided patches get 0: their backs absorb).
+pub fn direct_source_faces(patches: &Patches, lights: &[Light], back: bool) -> Vec<[f64; 3]> {
     let mut total = vec![[0.0; 3]; patches.len()];
     if lights.is_empty() {
         return total;
     }
     let rays = RayScene::new(&patches.corners, &patches.active);
     for (k, light) in lights.iter().enumerate() {
-        for (sum, d) in total.iter_mut().zip(light_source(patches, &rays, light, k)) {
+        for (sum, d) in total
+            .iter_mut()
+            .zip(light_source_faces(patches, &rays, light, k, back))
+        {
             for c in 0..3 {
                 sum[c] += d[c];
             }
@@ -121,6 +130,19 @@ pub fn light_source(
     light: &Light,
     index: usize,
 ) -> Vec<[f64; 3]> {
+    light_source_faces(patches, rays, light, index, false)
+}
+
+/// [`light_source`] of the front faces, or of the back faces when `back` (one-sided patches
+/// then get 0). A back face is its patch with the corners reversed and the normal negated,
+/// with its own random streams.
+pub fn light_source_faces(
+    patches: &Patches,
+    rays: &RayScene,
+    light: &Light,
+    index: usize,
+    back: bool,
+) -> Vec<[f64; 3]> {
     let sky_rays =
         (SKY_RAY_BUDGET / patches.active_count().max(1)).clamp(MIN_SKY_RAYS, MAX_SKY_RAYS);
     let seed = SEED.wrapping_add(index as u64);
@@ -131,8 +153,12 @@ pub fn light_source(
             if !patches.active[p] || rho.iter().all(|&r| r <= 0.0) {
                 return [0.0; 3];
             }
-            let mut rng = Rng::new(seed, p as u64);
-            let h = irradiance(patches, rays, p, light, sky_rays, &mut rng);
+            if back && !patches.is_two_sided(p) {
+                return [0.0; 3];
+            }
+            let stream = if back { p as u64 | 1 << 63 } else { p as u64 };
+            let mut rng = Rng::new(seed, stream);
+            let h = irradiance(patches, rays, p, back, light, sky_rays, &mut rng);
             [0, 1, 2].map(|c| {
                 let d = rho[c] * h[c] / PI;
                 if d.is_finite() {
@@ -150,12 +176,17 @@ fn irradiance(
     patches: &Patches,
     rays: &RayScene,
     p: usize,
+    back: bool,
     light: &Light,
     sky_rays: usize,
     rng: &mut Rng,
 ) -> [f64; 3] {
-    let tri = patches.corners[p];
-    let n = patches.normal[p];
+    let (tri, n) = if back {
+        let [a, b, c] = patches.corners[p];
+        ([a, c, b], -patches.normal[p])
+    } else {
+        (patches.corners[p], patches.normal[p])
+    };
     match light {
         Light::Sky { radiance } => {
             let k = sky_rays.isqrt();
@@ -321,7 +352,14 @@ pub fn attach(patches: &mut Patches, lights: &[Light]) {
         .map(|l| l.to_unit(&patches.frame, 1.0))
         .collect();
     let source = direct_source(patches, &unit);
-    let source_max = source.iter().flatten().fold(0.0f64, |m, &s| m.max(s));
+    let source_back = if patches.has_two_sided() {
+        direct_source_faces(patches, &unit, true)
+    } else {
+        Vec::new()
+    };
+    let source_max = (source.iter().chain(&source_back))
+        .flatten()
+        .fold(0.0f64, |m, &s| m.max(s));
     let scale = emission_max.max(source_max);
     let scale = if scale > 0.0 && scale.is_finite() {
         scale
@@ -333,6 +371,7 @@ pub fn attach(patches: &mut Patches, lights: &[Light]) {
         *e = e.map(|x| x * k);
     }
     patches.source = source.iter().map(|s| s.map(|x| x / scale)).collect();
+    patches.source_back = source_back.iter().map(|s| s.map(|x| x / scale)).collect();
     patches.lights = lights
         .iter()
         .map(|l| l.to_unit(&patches.frame, scale))

@@ -70,6 +70,14 @@ pub struct Patches {
     /// The scene's analytic lights in the unit frame, normalized like `emission` (what the
     /// reference path tracer samples). Empty when there are none.
     pub lights: Vec<crate::scene::lights::Light>,
+    /// Per patch: two-sided ([`Scene::two_sided`]): it emits and reflects on both faces, each
+    /// with its own radiance, and blocks light arriving at either. May be shorter than the
+    /// patch list (missing entries mean one-sided); see [`Patches::is_two_sided`].
+    pub two_sided: Vec<bool>,
+    /// Per patch, the reflected direct radiance of the analytic lights on its back face (as
+    /// `source`; 0 for one-sided patches). Empty when there is no analytic light or no
+    /// two-sided patch.
+    pub source_back: Vec<[f64; 3]>,
 }
 
 impl Patches {
@@ -81,6 +89,44 @@ impl Patches {
     /// True when there are no patches.
     pub fn is_empty(&self) -> bool {
         self.corners.is_empty()
+    }
+
+    /// True when patch `p` is two-sided and active (an inactive patch has no faces to solve).
+    pub fn is_two_sided(&self, p: usize) -> bool {
+        self.active[p] && self.two_sided.get(p).copied().unwrap_or(false)
+    }
+
+    /// True when some active patch is two-sided.
+    pub fn has_two_sided(&self) -> bool {
+        (0..self.len()).any(|p| self.is_two_sided(p))
+    }
+
+    /// These patches with every two-sided patch's back face appended as a one-sided patch of
+    /// its own (corners reversed, after the last patch; the pair covers each other's backs),
+    /// and per patch the index of its back face's patch. Input triangles keep their patches
+    /// (`first`), so the appended ones are outside every triangle's range.
+    pub fn with_back_faces(&self) -> (Patches, Vec<Option<usize>>) {
+        let mut out = self.clone();
+        out.two_sided = Vec::new();
+        out.source_back = Vec::new();
+        let has_source = !self.source.is_empty();
+        let mut back_of = vec![None; self.len()];
+        for p in (0..self.len()).filter(|&p| self.is_two_sided(p)) {
+            let [a, b, c] = self.corners[p];
+            back_of[p] = Some(out.len());
+            out.push(
+                [a, c, b],
+                self.parent[p],
+                self.albedo[p],
+                self.emission[p],
+                true,
+            );
+            if has_source {
+                out.source
+                    .push(self.source_back.get(p).copied().unwrap_or([0.0; 3]));
+            }
+        }
+        (out, back_of)
     }
 
     /// Appends one patch; `corners` in the unit frame.
@@ -147,6 +193,20 @@ impl Patches {
             }
         }
         e
+    }
+
+    /// [`Patches::emission_and_source`] of the back faces: a two-sided patch emits from both
+    /// faces and its back has its own direct light (`source_back`); one-sided patches get 0.
+    pub fn emission_and_source_back(&self) -> Vec<[f64; 3]> {
+        (0..self.len())
+            .map(|p| {
+                if !self.is_two_sided(p) {
+                    return [0.0; 3];
+                }
+                let s = self.source_back.get(p).copied().unwrap_or([0.0; 3]);
+                [0, 1, 2].map(|c| self.emission[p][c] + s[c])
+            })
+            .collect()
     }
 
     /// Number of active (non-degenerate) patches.
@@ -296,8 +356,10 @@ pub fn build_patches(scene: &Scene, max_edge: Option<f64>) -> Patches {
         let degenerate = scene.is_degenerate(t);
         let active = !degenerate && patches.twin[t].is_none();
         let k = split_factor(&world, degenerate, max_edge) as usize;
+        let two_sided = scene.is_two_sided(t);
         for piece in geometry::subdivide(&unit, k) {
             patches.push(piece, t as u32, scene.albedo[t], emission, active);
+            patches.two_sided.push(two_sided);
         }
     }
     patches.first.push(patches.len() as u32);

@@ -11,7 +11,12 @@ use crate::solve::solution::Solution;
 /// The exact header line of the per-triangle CSV (without the line break).
 pub const TRIANGLES_CSV_HEADER: &str = "index,area,emissive,r,g,b";
 
-/// Writes the per-input-triangle results as CSV with the header `index,area,emissive,r,g,b`.
+/// The columns added to [`TRIANGLES_CSV_HEADER`] when some triangle is two-sided: the back
+/// face's outgoing radiance (0 for one-sided triangles).
+pub const BACK_COLUMNS: &str = ",back_r,back_g,back_b";
+
+/// Writes the per-input-triangle results as CSV with the header `index,area,emissive,r,g,b`
+/// (and [`BACK_COLUMNS`] when the solution has back faces).
 ///
 /// One row per input triangle of `scene`, in input order: index (0-based), area in the scene's
 /// units squared, 1 if the triangle emits else 0, then the outgoing radiance B (RGB,
@@ -27,10 +32,13 @@ pub fn write_triangles_csv(path: &Path, scene: &Scene, solution: &Solution) -> R
             scene.len()
         )));
     }
+    let back = &solution.triangle_radiance_back;
+    let with_back = back.len() == scene.len();
     write_atomic(path, |w| {
-        writeln!(w, "{TRIANGLES_CSV_HEADER}")?;
+        write!(w, "{TRIANGLES_CSV_HEADER}")?;
+        writeln!(w, "{}", if with_back { BACK_COLUMNS } else { "" })?;
         for (t, b) in solution.triangle_radiance.iter().enumerate() {
-            writeln!(
+            write!(
                 w,
                 "{},{},{},{},{},{}",
                 t,
@@ -40,6 +48,17 @@ pub fn write_triangles_csv(path: &Path, scene: &Scene, solution: &Solution) -> R
                 format_f64(b[1]),
                 format_f64(b[2])
             )?;
+            if with_back {
+                let k = back[t];
+                write!(
+                    w,
+                    ",{},{},{}",
+                    format_f64(k[0]),
+                    format_f64(k[1]),
+                    format_f64(k[2])
+                )?;
+            }
+            writeln!(w)?;
         }
         Ok(())
     })

@@ -82,21 +82,35 @@ pub fn solve_reference(
 ) -> Solution {
     let spp = options.spp.max(1);
     let tracer = Tracer::new(patches);
-    let per_patch: Vec<[f64; 3]> = (0..patches.len())
-        .into_par_iter()
-        .map(|p| {
-            let b = tracer.estimate_patch(p, spp, options.seed, options.max_depth);
-            progress.inc(1);
-            b.map(|x| if x.is_finite() { x } else { 0.0 })
-        })
-        .collect();
+    let faces = |back: bool| -> Vec<[f64; 3]> {
+        (0..patches.len())
+            .into_par_iter()
+            .map(|p| {
+                if back && !patches.is_two_sided(p) {
+                    return [0.0; 3];
+                }
+                let b = tracer.estimate_patch(p, back, spp, options.seed, options.max_depth);
+                if !back {
+                    progress.inc(1);
+                }
+                b.map(|x| if x.is_finite() { x } else { 0.0 })
+            })
+            .collect()
+    };
+    let per_patch = faces(false);
+    // Two-sided patches' back faces, each its own estimate.
+    let per_patch_back = if patches.has_two_sided() {
+        faces(true)
+    } else {
+        Vec::new()
+    };
     let stats = SolveStats {
         iterations: spp,
         residual: 0.0,
         converged: true,
         ..SolveStats::default()
     };
-    Solution::from_normalized(patches, &per_patch, stats)
+    Solution::from_normalized_sides(patches, &per_patch, &per_patch_back, stats)
 }
 
 /// True for a number strictly above zero (false for NaN).
@@ -236,7 +250,11 @@ impl<'a> Tracer<'a> {
         let dist = dist2.sqrt();
         let w = d / dist;
         let cos_x = n.dot(w);
-        let cos_e = -self.patches.normal[e].dot(w);
+        let mut cos_e = -self.patches.normal[e].dot(w);
+        if self.patches.is_two_sided(e) {
+            // A two-sided emitter emits from both faces.
+            cos_e = cos_e.abs();
+        }
         if !(cos_x > 0.0 && cos_e > 0.0) {
             return [0.0; 3];
         }
@@ -289,7 +307,13 @@ impl<'a> Tracer<'a> {
                 break;
             };
             let q = hit.patch;
-            let cos_q = -self.patches.normal[q].dot(dir);
+            let mut normal_q = self.patches.normal[q];
+            let mut cos_q = -normal_q.dot(dir);
+            if cos_q < 0.0 && self.patches.is_two_sided(q) {
+                // The back face of a two-sided patch: it emits and reflects like the front.
+                normal_q = -normal_q;
+                cos_q = -cos_q;
+            }
             if !positive(cos_q) {
                 break; // back side (or grazing): absorbed
             }
@@ -323,15 +347,23 @@ impl<'a> Tracer<'a> {
                 break;
             }
             pos = hit.point;
-            normal = self.patches.normal[q];
+            normal = normal_q;
             patch = q;
             u = (rng.next_f64(), rng.next_f64());
         }
         radiance
     }
 
-    /// B of patch `p` (normalized units) from `spp` samples.
-    fn estimate_patch(&self, p: usize, spp: usize, seed: u64, max_depth: usize) -> [f64; 3] {
+    /// B of patch `p`'s front face, or of its back face when `back` (normalized units), from
+    /// `spp` samples.
+    fn estimate_patch(
+        &self,
+        p: usize,
+        back: bool,
+        spp: usize,
+        seed: u64,
+        max_depth: usize,
+    ) -> [f64; 3] {
         let e = self.patches.emission[p];
         let rho = self.patches.albedo[p];
         if !self.patches.active[p]
@@ -341,8 +373,12 @@ impl<'a> Tracer<'a> {
             return e;
         }
         let tri = self.patches.corners[p];
-        let n = self.patches.normal[p];
-        let mut rng = Rng::new(seed, p as u64);
+        let n = if back {
+            -self.patches.normal[p]
+        } else {
+            self.patches.normal[p]
+        };
+        let mut rng = Rng::new(seed, if back { p as u64 | 1 << 63 } else { p as u64 });
         // Jittered k x k grids for the point (cell i) and the first direction (cell perm[i]),
         // paired by a random permutation (drawn anew for every round of k^2 samples) so the
         // estimator stays unbiased; the remainder spp mod k^2 samples are uniform. k is capped

@@ -734,5 +734,6 @@ fn append(object: &Scene, extra: Builder) -> Scene {
         warnings: Vec::new(),
         camera: None,
         lights: object.lights.clone(),
+        two_sided: Vec::new(),
     }
 }

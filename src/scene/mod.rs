@@ -104,6 +104,12 @@ pub struct Scene {
     /// Analytic lights (point, spot, sun, sky) in the scene's frame, radiometric units
     /// ([`lights`]); from glTF's `KHR_lights_punctual` or the command line.
     pub lights: Vec<lights::Light>,
+    /// Per-triangle: the surface is two-sided. It emits and reflects on both faces (each face
+    /// has its own radiance, the back one reported as [`crate::solve::solution::Solution`]'s
+    /// `triangle_radiance_back`) and blocks light arriving at either. May be shorter than the
+    /// triangle list: missing entries mean one-sided (front = counter-clockwise). Set from
+    /// glTF's `doubleSided`, [`Scene::set_two_sided`] or [`Scene::set_two_sided_material`].
+    pub two_sided: Vec<bool>,
 }
 
 /// A camera stored with a scene: where the eye is, what it looks at, the vertical field of view.
@@ -254,6 +260,47 @@ impl Scene {
     pub fn material_name(&self, t: usize) -> Option<&str> {
         let m = self.material.get(t).copied().flatten()?;
         self.material_names.get(m as usize).map(String::as_str)
+    }
+
+    /// True when triangle `t` is two-sided ([`Scene::two_sided`]).
+    pub fn is_two_sided(&self, t: usize) -> bool {
+        self.two_sided.get(t).copied().unwrap_or(false)
+    }
+
+    /// True when some triangle is two-sided.
+    pub fn has_two_sided(&self) -> bool {
+        self.two_sided.iter().any(|&b| b)
+    }
+
+    /// Makes every triangle two-sided.
+    pub fn set_two_sided(&mut self) {
+        self.two_sided = vec![true; self.len()];
+    }
+
+    /// Makes the triangles of material `name` two-sided; returns how many there are.
+    ///
+    /// Errors: [`Error::Parameter`] when the scene defines no material of that name.
+    pub fn set_two_sided_material(&mut self, name: &str) -> Result<usize> {
+        let Some(m) = self.material_names.iter().position(|n| n == name) else {
+            return Err(Error::Parameter(format!(
+                "two-sided material '{name}' is not a material of {} (it has {})",
+                self.path.display(),
+                if self.material_names.is_empty() {
+                    "none".to_string()
+                } else {
+                    self.material_names.join(", ")
+                }
+            )));
+        };
+        self.two_sided.resize(self.len(), false);
+        let mut count = 0;
+        for t in 0..self.len() {
+            if self.material.get(t).copied().flatten() == Some(m as u32) {
+                self.two_sided[t] = true;
+                count += 1;
+            }
+        }
+        Ok(count)
     }
 
     /// True when triangle `t` emits in any channel.

@@ -57,7 +57,7 @@ pub fn exposed_backs(patches: &Patches) -> Vec<bool> {
     (0..patches.len())
         .into_par_iter()
         .map(|p| {
-            if !patches.active[p] || twinned[p] {
+            if !patches.active[p] || twinned[p] || patches.is_two_sided(p) {
                 return false;
             }
             let (tri, n) = (&patches.corners[p], patches.normal[p]);
@@ -72,7 +72,8 @@ pub fn exposed_backs(patches: &Patches) -> Vec<bool> {
                 let dir = cosine_direction(-n, rng.next_f64(), rng.next_f64());
                 if let Some(hit) = scene.closest(org, dir, p) {
                     hits += 1;
-                    if patches.normal[hit.patch].dot(dir) < 0.0 {
+                    // A two-sided patch's faces are both fronts: they reflect.
+                    if patches.normal[hit.patch].dot(dir) < 0.0 || patches.is_two_sided(hit.patch) {
                         fronts += 1;
                     }
                 }
@@ -115,13 +116,20 @@ fn back_to_back_twins(patches: &Patches) -> Vec<bool> {
 
 /// Per patch: it blocks light arriving at its back. [`exposed_backs`] when
 /// `options.block_exposed_backs` (and antiradiance is on), every patch when `options.two_sided`,
-/// none otherwise. Shared by both solvers.
+/// none otherwise; two-sided patches ([`Patches::two_sided`]) always (with antiradiance).
+/// Shared by both solvers.
 pub fn back_blocking(patches: &Patches, options: &crate::solve::SolverOptions) -> Vec<bool> {
-    if options.two_sided || !options.antiradiance || !options.block_exposed_backs {
+    let mut blocking = if options.two_sided || !options.antiradiance || !options.block_exposed_backs
+    {
         vec![options.two_sided; patches.len()]
     } else {
         exposed_backs(patches)
+    };
+    // A two-sided patch blocks light arriving at either face.
+    for (p, b) in blocking.iter_mut().enumerate() {
+        *b |= options.antiradiance && patches.is_two_sided(p);
     }
+    blocking
 }
 
 pub use crate::geometry::tolerances::CONVEX_TOLERANCE;

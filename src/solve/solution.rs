@@ -147,6 +147,13 @@ pub struct Solution {
     pub patch_radiance: Vec<[f64; 3]>,
     /// Outgoing radiance B per input triangle (area-weighted mean of its patches), in input order.
     pub triangle_radiance: Vec<[f64; 3]>,
+    /// Outgoing radiance of each patch's back face, RGB, scene units: empty when no patch is
+    /// two-sided ([`Patches::two_sided`]), else one value per patch (0 for one-sided patches,
+    /// whose backs absorb).
+    pub patch_radiance_back: Vec<[f64; 3]>,
+    /// The back faces per input triangle, as `triangle_radiance` (empty when no patch is
+    /// two-sided).
+    pub triangle_radiance_back: Vec<[f64; 3]>,
     /// How the solve went.
     pub stats: SolveStats,
 }
@@ -180,10 +187,72 @@ impl Solution {
         let mut solution = Solution {
             patch_radiance,
             triangle_radiance: Vec::new(),
+            patch_radiance_back: Vec::new(),
+            triangle_radiance_back: Vec::new(),
             stats,
         };
         solution.settle_inactive(patches);
         solution
+    }
+
+    /// [`Solution::from_normalized`] with the back faces' radiance too (`normalized_back`: one
+    /// value per patch, or empty when no patch is two-sided); one-sided patches' backs are
+    /// set to 0.
+    pub fn from_normalized_sides(
+        patches: &Patches,
+        normalized: &[[f64; 3]],
+        normalized_back: &[[f64; 3]],
+        stats: SolveStats,
+    ) -> Solution {
+        let mut solution = Solution::from_normalized(patches, normalized, stats);
+        if normalized_back.len() == patches.len() && patches.has_two_sided() {
+            solution.patch_radiance_back = (0..patches.len())
+                .map(|p| {
+                    if patches.is_two_sided(p) {
+                        normalized_back[p].map(|x| sanitize(x * patches.emission_scale))
+                    } else {
+                        [0.0; 3]
+                    }
+                })
+                .collect();
+            solution.triangle_radiance_back = patches.to_input(&solution.patch_radiance_back);
+        }
+        solution
+    }
+
+    /// The solution of `patches` from that of [`Patches::with_back_faces`]: the first
+    /// `patches.len()` values are the fronts, `back_of[p]` the patch holding `p`'s back face.
+    pub fn fold_back_faces(self, patches: &Patches, back_of: &[Option<usize>]) -> Solution {
+        let n = patches.len();
+        let patch_radiance_back = back_of
+            .iter()
+            .map(|b| b.map_or([0.0; 3], |k| self.patch_radiance[k]))
+            .collect();
+        let mut solution = Solution {
+            patch_radiance: self.patch_radiance[..n].to_vec(),
+            triangle_radiance: Vec::new(),
+            patch_radiance_back,
+            triangle_radiance_back: Vec::new(),
+            stats: self.stats,
+        };
+        solution.settle_inactive(patches);
+        solution.triangle_radiance_back = patches.to_input(&solution.patch_radiance_back);
+        solution
+    }
+
+    /// The radiance leaving input triangle `t` on the side that faces `towards` (a world
+    /// direction from the triangle to the viewer; `normal` its front normal): the back face's
+    /// when the viewer is behind a two-sided triangle, else the front's.
+    pub fn triangle_radiance_seen(
+        &self,
+        t: usize,
+        normal: glam::DVec3,
+        towards: glam::DVec3,
+    ) -> [f64; 3] {
+        match self.triangle_radiance_back.get(t) {
+            Some(&back) if normal.dot(towards) < 0.0 => back,
+            _ => self.triangle_radiance[t],
+        }
     }
 
     /// Gives inactive patches the values the model fixes for them and recomputes the
@@ -291,17 +360,38 @@ pub fn source_and_albedo_max(patches: &Patches) -> (f64, f64) {
 /// way.
 pub fn finish(
     patches: &Patches,
-    mut radiance: Vec<[f64; 3]>,
+    radiance: Vec<[f64; 3]>,
+    stats: SolveStats,
+    clamp_negative: bool,
+    bound: Option<f64>,
+) -> Solution {
+    finish_sides(patches, radiance, Vec::new(), stats, clamp_negative, bound)
+}
+
+/// [`finish`] with the back faces' radiance of two-sided patches too (`back`: one value per
+/// patch, 0 for one-sided ones, or empty when no patch is two-sided); the checks cover both
+/// faces.
+pub fn finish_sides(
+    patches: &Patches,
+    mut front: Vec<[f64; 3]>,
+    mut back: Vec<[f64; 3]>,
     mut stats: SolveStats,
     clamp_negative: bool,
     bound: Option<f64>,
 ) -> Solution {
+    let n = front.len();
+    if back.len() != n {
+        back.clear();
+    }
     let bound = bound.unwrap_or(0.0);
     let mut largest = 0.0f64;
     let mut finite = true;
-    for (p, b) in radiance.iter().enumerate() {
+    let faces = |k: usize| if k < n { k } else { k - n };
+    let mut radiance: Vec<&mut [f64; 3]> = front.iter_mut().chain(back.iter_mut()).collect();
+    for (k, b) in radiance.iter().enumerate() {
+        let p = faces(k);
         if patches.active[p] {
-            for &x in b {
+            for &x in b.iter() {
                 finite &= x.is_finite();
                 if x.is_finite() {
                     largest = largest.max(x.abs());
@@ -312,8 +402,8 @@ pub fn finish(
     let mut negative = 0.0;
     let mut positive = 0.0;
     let mut negative_patches = 0;
-    for (p, b) in radiance.iter_mut().enumerate() {
-        let a = patches.area[p];
+    for (k, b) in radiance.iter_mut().enumerate() {
+        let a = patches.area[faces(k)];
         let mut neg = false;
         for x in b.iter_mut() {
             *x = sanitize(*x);
@@ -377,5 +467,6 @@ pub fn finish(
         f.negative_fraction = stats.negative_fraction;
         stats.converged = false;
     }
-    Solution::from_normalized(patches, &radiance, stats)
+    drop(radiance);
+    Solution::from_normalized_sides(patches, &front, &back, stats)
 }

@@ -97,6 +97,17 @@ impl PatchGeom {
         self
     }
 
+    /// The same patch seen from its back: corners in the reverse order, the normal negated
+    /// (what a two-sided patch's back face is to a coupling).
+    pub fn flipped(&self) -> PatchGeom {
+        let [a, b, c] = self.corners;
+        PatchGeom {
+            corners: [a, c, b],
+            normal: -self.normal,
+            ..*self
+        }
+    }
+
     /// Gathers the geometry of a triangle with a known unit normal.
     pub fn new(corners: Tri, normal: DVec3) -> PatchGeom {
         let centroid = geometry::centroid(&corners);

@@ -26,7 +26,8 @@ impl Emitters {
     pub(super) fn count(patches: &Patches) -> usize {
         (0..patches.len())
             .filter(|&p| Emitters::emits(patches, p))
-            .count()
+            .map(|p| 1 + usize::from(patches.is_two_sided(p)))
+            .sum()
     }
 
     /// The active patches that emit in some channel.
@@ -39,11 +40,18 @@ impl Emitters {
         for p in 0..patches.len() {
             let e = patches.emission[p];
             if Emitters::emits(patches, p) {
-                emitters.patch.push(p as u32);
-                emitters
-                    .geom
-                    .push(PatchGeom::new(patches.corners[p], patches.normal[p]));
-                emitters.emission.push(e);
+                let front = PatchGeom::new(patches.corners[p], patches.normal[p]);
+                // A two-sided emitter emits from its back face too: a second emitter.
+                let faces = if patches.is_two_sided(p) {
+                    vec![front, front.flipped()]
+                } else {
+                    vec![front]
+                };
+                for geom in faces {
+                    emitters.patch.push(p as u32);
+                    emitters.geom.push(geom);
+                    emitters.emission.push(e);
+                }
             }
         }
         emitters

@@ -9,6 +9,7 @@ use crate::solve::budget::{self, Budget};
 use crate::solve::dense;
 use crate::solve::health::FailureKind;
 use crate::solve::hierarchical::{Element, Prepared};
+use crate::solve::solution::finish_sides;
 use crate::solve::solution::{Solution, SolveStats};
 use crate::solve::{emission_bound, finish, SolverOptions};
 
@@ -41,11 +42,11 @@ pub(super) fn add_emission(
         .collect()
 }
 
-/// Adds the analytic lights' reflected direct radiance ([`Patches::source`], per patch) to the
-/// receivers' source.
-fn add_light_source(patches: &Patches, receivers: &[Element], source: &mut [[f64; 3]]) {
+/// Adds the analytic lights' reflected direct radiance (`per_patch`: [`Patches::source`], or
+/// [`Patches::source_back`] for back faces) to the receivers' source.
+fn add_light_source(per_patch: &[[f64; 3]], receivers: &[Element], source: &mut [[f64; 3]]) {
     for (r, d) in receivers.iter().zip(source.iter_mut()) {
-        if let Some(s) = patches.source.get(r.patch as usize) {
+        if let Some(s) = per_patch.get(r.patch as usize) {
             for c in 0..3 {
                 d[c] += s[c];
             }
@@ -106,7 +107,9 @@ pub fn solve_hierarchical_direct(
     progress: &Progress,
 ) -> Result<Solution> {
     let mut prepared = Prepared::new(patches, options, false)?;
-    let receivers: Vec<Element> = prepared.elements().collect();
+    // Every face: the elements' fronts, then the two-sided elements' backs.
+    let receivers: Vec<Element> = prepared.faces().collect();
+    let n = prepared.element_count();
     let t_direct = std::time::Instant::now();
     let skip = |mut prepared: Prepared, step: Option<&str>| {
         prepared.note_memory(0, step);
@@ -124,15 +127,23 @@ pub fn solve_hierarchical_direct(
     }
     prepared.note_memory(bytes, None);
     let mut source = direct.reflected(&receivers, progress);
-    add_light_source(patches, &receivers, &mut source);
+    let (fronts, backs) = source.split_at_mut(n);
+    add_light_source(&patches.source, &receivers[..n], fronts);
+    add_light_source(&patches.source_back, &receivers[n..], backs);
     drop(direct);
     prepared.timings.direct = t_direct.elapsed().as_secs_f64();
     let (reflected, state) = prepared.solve_with_source(patches, &source, None, progress);
     // `reflected` is R clamped and scaled; B is formed from the unclamped element values.
-    let radiance = add_emission(patches, &receivers, state.radiance());
-    Ok(finish(
+    let radiance = add_emission(patches, &receivers[..n], state.radiance());
+    let radiance_back = if state.radiance_back().is_empty() {
+        Vec::new()
+    } else {
+        add_emission(patches, &receivers[..n], state.radiance_back())
+    };
+    Ok(finish_sides(
         patches,
         radiance,
+        radiance_back,
         without_negative_check(reflected.stats),
         options.clamp_negative,
         emission_bound(patches, options.antiradiance),
@@ -174,7 +185,7 @@ pub fn solve_dense_direct(
         return skip(None);
     }
     let mut source = direct.reflected(&receivers, progress);
-    add_light_source(patches, &receivers, &mut source);
+    add_light_source(&patches.source, &receivers, &mut source);
     drop(direct);
     let mut with_source = patches.clone();
     with_source.source = Vec::new();

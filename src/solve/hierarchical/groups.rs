@@ -209,12 +209,12 @@ impl SenderGroups {
     #[allow(clippy::too_many_arguments)]
     pub(super) fn accumulate<const C: usize>(
         &self,
-        radiance: &[[f64; C]],
+        (radiance, radiance_back): (&[[f64; C]], &[[f64; C]]),
         anti: &[[f32; C]],
         live: &LiveBins,
         elem_area: &[f64],
         nb: usize,
-        group_b: &mut [[f64; C]],
+        (group_b, group_b_back): (&mut [[f64; C]], &mut [[f64; C]]),
         group_a: &mut [[f64; C]],
     ) {
         // group_a is bin-major: bin b of group g at b * ng + g, so the groups of one node in
@@ -222,6 +222,7 @@ impl SenderGroups {
         let ng = self.normal.len();
         debug_assert_eq!(group_a.len(), ng * nb);
         group_b.fill([0.0; C]);
+        group_b_back.fill([0.0; C]);
         group_a.fill([0.0; C]);
         for (e, &g) in self.elem_group.iter().enumerate() {
             if g == NONE {
@@ -230,6 +231,11 @@ impl SenderGroups {
             let (g, a) = (g as usize, elem_area[e]);
             for c in 0..C {
                 group_b[g][c] += a * radiance[e][c];
+            }
+            if let (Some(dst), Some(b)) = (group_b_back.get_mut(g), radiance_back.get(e)) {
+                for c in 0..C {
+                    dst[c] += a * b[c];
+                }
             }
             let stored = &anti[live.start[e] as usize..live.start[e + 1] as usize];
             for (bin, s) in live.bins_of(e).zip(stored) {
@@ -245,6 +251,11 @@ impl SenderGroups {
             let child = group_b[g as usize];
             for (d, s) in group_b[p as usize].iter_mut().zip(child) {
                 *d += s;
+            }
+            if let Some(&child) = group_b_back.get(g as usize) {
+                for (d, s) in group_b_back[p as usize].iter_mut().zip(child) {
+                    *d += s;
+                }
             }
         }
         for row in group_a.chunks_mut(ng.max(1)) {

@@ -41,7 +41,7 @@ use crate::solve::health::{self, Guard};
 use crate::solve::model::{self, ModelStats};
 pub use crate::solve::solution::HierarchyTimings;
 use crate::solve::solution::{Solution, SolveStats};
-use crate::solve::{change_ratio, finish, Convergence, SolverOptions};
+use crate::solve::{change_ratio, Convergence, SolverOptions};
 use crate::transport::gather_entries;
 
 /// A scene prepared for hierarchical solving: tree, links and element arrays. Build it once and
@@ -61,6 +61,11 @@ pub struct Prepared {
     elem_patch: Vec<u32>,
     /// Per element: it blocks light arriving at its back (two-sided coupling).
     elem_back: Vec<bool>,
+    /// Per element: two-sided (its back face has a radiance of its own); empty when no element
+    /// is.
+    elem_two: Vec<bool>,
+    /// The two-sided elements in element order: the back faces of [`Prepared::faces`].
+    back_faces: Vec<u32>,
     /// Input patches that block light arriving at their back.
     back_blocking_patches: u64,
     /// Normal groups of the large nodes, for the pull.
@@ -96,11 +101,15 @@ pub struct Prepared {
 pub struct ElementState {
     /// Outgoing radiance per element, RGB (normalized units).
     radiance: Vec<[f64; 3]>,
+    /// Outgoing radiance of each element's back face (0 for one-sided elements); empty when no
+    /// element is two-sided.
+    radiance_back: Vec<[f64; 3]>,
     /// Antiradiance per stored (element, bin) slot, `channels` values each.
     anti: Vec<f32>,
     /// Colour channels of `anti`: 1 (grey solve) or 3.
     channels: usize,
-    /// The per-element source the state was solved for (RGB, normalized units).
+    /// The per-face source the state was solved for (RGB, normalized units, face order of
+    /// [`Prepared::faces`]).
     source: Vec<[f64; 3]>,
     /// Where the iteration stood ([`Prepared::resume_with_source`] goes on from it).
     resume: Option<Box<Resume>>,
@@ -125,13 +134,20 @@ struct Resume {
     damped_after: Option<usize>,
 }
 
-/// Radiance per element and antiradiance per stored slot, in `C` channels.
-type ChannelState<const C: usize> = (Vec<[f64; C]>, Vec<[f32; C]>);
+/// Radiance per element, back faces' radiance per element (empty when none is two-sided) and
+/// antiradiance per stored slot, in `C` channels.
+type ChannelState<const C: usize> = (Vec<[f64; C]>, Vec<[f64; C]>, Vec<[f32; C]>);
 
 impl ElementState {
     /// Outgoing radiance per element (normalized units, element order of [`Prepared`]).
     pub fn radiance(&self) -> &[[f64; 3]] {
         &self.radiance
+    }
+
+    /// Outgoing radiance of each element's back face (normalized units, element order; 0 for
+    /// one-sided elements); empty when no element is two-sided.
+    pub fn radiance_back(&self) -> &[[f64; 3]] {
+        &self.radiance_back
     }
 
     /// The per-element source the state was solved for (normalized units, element order of
@@ -149,12 +165,22 @@ impl ElementState {
     /// The state in `C` channels, or `None` when it does not belong to a scene with `n`
     /// elements and `slots` stored antiradiance bins. Grey to RGB repeats the channel; RGB to
     /// grey takes the mean.
-    fn to_channels<const C: usize>(&self, n: usize, slots: usize) -> Option<ChannelState<C>> {
+    fn to_channels<const C: usize>(
+        &self,
+        n: usize,
+        backs: usize,
+        slots: usize,
+    ) -> Option<ChannelState<C>> {
         let k = self.channels;
-        if self.radiance.len() != n || k == 0 || self.anti.len() != slots * k {
+        if self.radiance.len() != n
+            || self.radiance_back.len() != backs
+            || k == 0
+            || self.anti.len() != slots * k
+        {
             return None;
         }
         let radiance = self.radiance.iter().map(|&b| channels_of(b)).collect();
+        let radiance_back = self.radiance_back.iter().map(|&b| channels_of(b)).collect();
         let anti = self
             .anti
             .chunks_exact(k)
@@ -163,7 +189,7 @@ impl ElementState {
                 channels_of::<C>(rgb).map(|x| x as f32)
             })
             .collect();
-        Some((radiance, anti))
+        Some((radiance, radiance_back, anti))
     }
 }
 
@@ -295,6 +321,10 @@ impl Prepared {
         let mut tree = ClusterTree::build(patches);
         let back_blocking = model::back_blocking(patches, options);
         tree.mark_back_blocking(&back_blocking);
+        let two_sided: Vec<bool> = (0..patches.len())
+            .map(|p| patches.is_two_sided(p))
+            .collect();
+        tree.mark_two_sided(&two_sided);
         let t1 = Instant::now();
         let links = links::refine(
             &mut tree,
@@ -313,6 +343,8 @@ impl Prepared {
             elem_albedo: Vec::with_capacity(tree.elements.len()),
             elem_patch: Vec::with_capacity(tree.elements.len()),
             elem_back: Vec::with_capacity(tree.elements.len()),
+            elem_two: Vec::new(),
+            back_faces: Vec::new(),
             back_blocking_patches: back_blocking.iter().filter(|&&b| b).count() as u64,
             groups: SenderGroups::default(),
             live: LiveBins::default(),
@@ -345,6 +377,15 @@ impl Prepared {
             prepared.elem_albedo.push(patches.albedo[n.patch as usize]);
             prepared.elem_patch.push(n.patch);
             prepared.elem_back.push(n.blocks_back);
+        }
+        if two_sided.iter().any(|&b| b) {
+            let tree = &prepared.tree;
+            prepared.elem_two = (tree.elements.iter())
+                .map(|&node| tree.nodes[node as usize].two_sided)
+                .collect();
+            prepared.back_faces = (0..prepared.elem_two.len() as u32)
+                .filter(|&e| prepared.elem_two[e as usize])
+                .collect();
         }
         prepared.groups = SenderGroups::build(
             &prepared.tree,
@@ -490,8 +531,40 @@ impl Prepared {
             + self.groups.bytes(nb)
     }
 
-    /// The elements, in the order of [`ElementState`] and of `elem_source` in
+    /// The faces the solver gives a radiance: every element's front ([`Prepared::elements`]),
+    /// then the back face of every two-sided element in element order (its corners in the
+    /// reverse order, its normal negated). The order of `elem_source` in
     /// [`Prepared::solve_with_source`].
+    pub fn faces(&self) -> impl Iterator<Item = Element> + '_ {
+        let backs = self.back_faces.iter().map(|&e| {
+            let front = self.element(e as usize);
+            let [a, b, c] = front.corners;
+            Element {
+                corners: [a, c, b],
+                normal: -front.normal,
+                ..front
+            }
+        });
+        self.elements().chain(backs)
+    }
+
+    /// Number of [`Prepared::faces`]: the elements and the two-sided elements' back faces.
+    pub fn face_count(&self) -> usize {
+        self.element_count() + self.back_faces.len()
+    }
+
+    /// Element `e`.
+    fn element(&self, e: usize) -> Element {
+        Element {
+            corners: self.tree.nodes[self.tree.elements[e] as usize].corners,
+            normal: self.elem_normal[e],
+            area: self.elem_area[e],
+            patch: self.elem_patch[e],
+        }
+    }
+
+    /// The elements, in the order of [`ElementState`] (the front faces of
+    /// [`Prepared::faces`]).
     pub fn elements(&self) -> impl ExactSizeIterator<Item = Element> + '_ {
         self.tree
             .elements
@@ -507,7 +580,11 @@ impl Prepared {
 
     /// Solves with the patches' own emission.
     pub fn solve(&mut self, patches: &Patches, progress: &Progress) -> (Solution, ElementState) {
-        self.solve_with_emission(patches, &patches.emission_and_source(), None, progress)
+        let source = self.element_source_sides(
+            &patches.emission_and_source(),
+            &patches.emission_and_source_back(),
+        );
+        self.solve_with_source(patches, &source, None, progress)
     }
 
     /// Solves for a given per-patch emission (normalized units, as in `Patches::emission`),
@@ -535,10 +612,23 @@ impl Prepared {
     /// # Panics
     /// When a patch of an element is out of range of `patch_source`.
     pub fn element_source(&self, patch_source: &[[f64; 3]]) -> Vec<[f64; 3]> {
-        self.elem_patch
-            .iter()
-            .map(|&p| patch_source[p as usize])
-            .collect()
+        self.element_source_sides(patch_source, patch_source)
+    }
+
+    /// The per-face source ([`Prepared::faces`]) of per-patch sources of the front faces and of
+    /// the back faces (each face takes its patch's value).
+    ///
+    /// # Panics
+    /// When a patch of an element is out of range of either source.
+    pub fn element_source_sides(
+        &self,
+        patch_front: &[[f64; 3]],
+        patch_back: &[[f64; 3]],
+    ) -> Vec<[f64; 3]> {
+        let fronts = self.elem_patch.iter().map(|&p| patch_front[p as usize]);
+        let backs =
+            (self.back_faces.iter()).map(|&e| patch_back[self.elem_patch[e as usize] as usize]);
+        fronts.chain(backs).collect()
     }
 
     /// Solves `B_e = source_e + rho_e H_e(B)` for a per-element source radiance (normalized
@@ -613,7 +703,7 @@ impl Prepared {
         deadline: Option<Instant>,
         progress: &Progress,
     ) -> (Solution, ElementState) {
-        assert_eq!(elem_source.len(), self.element_count());
+        assert_eq!(elem_source.len(), self.face_count());
         let grey = self.albedo_grey && elem_source.iter().all(|s| model::is_grey(*s));
         if grey {
             self.solve_channels::<1>(patches, elem_source, warm, resume, deadline, progress)
@@ -633,6 +723,7 @@ impl Prepared {
             elem_normal: &self.elem_normal,
             elem_center: &self.elem_center,
             elem_back: &self.elem_back,
+            elem_two: &self.elem_two,
             use_anti: self.use_anti,
             two_sided: self.options.two_sided,
         }
@@ -640,7 +731,7 @@ impl Prepared {
 
     /// Bytes of the per-sweep state with `channels` colour channels.
     fn state_bytes(&self, channels: u64) -> u64 {
-        let n = self.element_count() as u64;
+        let n = (self.element_count() + self.elem_two.len()) as u64;
         2 * (n * 8 * channels + self.live.slots() as u64 * 4 * channels)
     }
 
@@ -661,26 +752,46 @@ impl Prepared {
         let n = self.element_count();
         let two_sided = options.two_sided;
         let elem_back = &self.elem_back;
+        let elem_two = &self.elem_two;
         let use_anti = self.use_anti;
         let live = &self.live;
         let slots = live.slots();
-        let emission: Vec<[f64; C]> = elem_source.iter().map(|&s| channels_of(s)).collect();
+        // Back faces: dense per element (0 for one-sided ones) when some element is two-sided.
+        let backs = self.elem_two.len();
+        let dense_back = |faces: &[[f64; 3]]| -> Vec<[f64; C]> {
+            let mut back = vec![[0.0; C]; backs];
+            for (&e, &s) in self.back_faces.iter().zip(&faces[n..]) {
+                back[e as usize] = channels_of(s);
+            }
+            back
+        };
+        let emission: Vec<[f64; C]> = elem_source[..n].iter().map(|&s| channels_of(s)).collect();
+        let emission_back = dense_back(elem_source);
         let albedo: Vec<[f64; C]> = self.elem_albedo.iter().map(|&a| channels_of(a)).collect();
         // A warm start that belongs to this scene: the same source goes on with its iteration;
         // another one moves each element's radiance by the change of its source.
-        let warm = warm.and_then(|w| w.to_channels::<C>(n, slots).map(|values| (w, values)));
+        let warm = (warm.and_then(|w| w.to_channels::<C>(n, backs, slots)))
+            .zip(warm)
+            .map(|(values, w)| (w, values));
         let matched = warm.is_some();
-        let same_source_len = warm.as_ref().is_some_and(|(w, _)| w.source.len() == n);
+        let faces = elem_source.len();
+        let same_source_len = warm.as_ref().is_some_and(|(w, _)| w.source.len() == faces);
         let same_source = warm.as_ref().is_some_and(|(w, _)| w.source == elem_source);
-        let (mut radiance, mut anti) = match warm {
-            Some((w, (mut radiance, mut anti))) => {
-                if !same_source && w.source.len() == n {
+        let (mut radiance, mut radiance_back, mut anti) = match warm {
+            Some((w, (mut radiance, mut radiance_back, mut anti))) => {
+                if !same_source && w.source.len() == faces {
                     // The old state scaled per channel by the least-squares factor of the new
                     // source against the old one (exact when every light changed by one factor),
                     // then moved by what that leaves of the change.
-                    let old: Vec<[f64; C]> = w.source.iter().map(|&s| channels_of(s)).collect();
+                    let old: Vec<[f64; C]> =
+                        w.source[..n].iter().map(|&s| channels_of(s)).collect();
+                    let old_back = dense_back(&w.source);
                     let k = source_factor(&emission, &old, &self.elem_area);
-                    for (b, (new, old)) in radiance.iter_mut().zip(emission.iter().zip(&old)) {
+                    let fronts = radiance.iter_mut().zip(emission.iter().zip(&old));
+                    let back_faces = radiance_back
+                        .iter_mut()
+                        .zip(emission_back.iter().zip(&old_back));
+                    for (b, (new, old)) in fronts.chain(back_faces) {
                         for c in 0..C {
                             b[c] = k[c] * b[c] + new[c] - k[c] * old[c];
                         }
@@ -691,9 +802,13 @@ impl Prepared {
                         }
                     }
                 }
-                (radiance, anti)
+                (radiance, radiance_back, anti)
             }
-            None => (emission.clone(), vec![[0.0f32; C]; slots]),
+            None => (
+                emission.clone(),
+                emission_back.clone(),
+                vec![[0.0f32; C]; slots],
+            ),
         };
         let resume = resume.filter(|_| matched);
         let (resume, going_on) = match resume {
@@ -701,6 +816,7 @@ impl Prepared {
             other => (other, false),
         };
         let mut next_radiance = radiance.clone();
+        let mut next_radiance_back = radiance_back.clone();
         let mut next_anti = anti.clone();
         let mut intensity = vec![[0.0f32; C]; self.links.cluster.len()];
         // Three channels and every bin of every element, against what this solve stores.
@@ -730,11 +846,13 @@ impl Prepared {
             .fold(0.0f64, f64::max);
         let source_max = emission
             .iter()
+            .chain(&emission_back)
             .flat_map(|s| s.iter().map(|x| x.abs()))
             .fold(0.0f64, f64::max);
         let reference_mass: f64 = emission
             .iter()
             .zip(&self.elem_area)
+            .chain(emission_back.iter().zip(&self.elem_area))
             .map(|(s, &a)| a * s.iter().map(|x| x.abs()).sum::<f64>())
             .sum::<f64>()
             / (1.0 - rho_max.clamp(0.0, 0.9999));
@@ -748,7 +866,7 @@ impl Prepared {
         if let Some(r) = resume {
             kept_anderson = r
                 .anderson
-                .filter(|a| a.len() == state_len_of::<C>(n, slots));
+                .filter(|a| a.len() == state_len_of::<C>(n + backs, slots));
             if going_on {
                 convergence = r.convergence;
                 guard = r.guard;
@@ -762,7 +880,7 @@ impl Prepared {
         // fits its own budget and what the model leaves of the memory limit; its residuals
         // shrink faster than the plain sweep's contraction, so the remaining error is estimated
         // with the largest albedo as the contraction bound instead.
-        let state_len = state_len_of::<C>(n, slots);
+        let state_len = state_len_of::<C>(n + backs, slots);
         let depth = options.acceleration_depth;
         let history = Anderson::bytes(state_len, depth) + 16 * state_len as u64;
         let mut memory = self.memory.clone();
@@ -798,7 +916,7 @@ impl Prepared {
                 return kept;
             }
             let mut weight = Vec::with_capacity(state_len);
-            for &a in &self.elem_area {
+            for &a in self.elem_area.iter().chain(&self.elem_area[..backs]) {
                 weight.extend(std::iter::repeat_n(a, C));
             }
             for e in 0..n {
@@ -820,6 +938,7 @@ impl Prepared {
 
         let groups = &self.groups;
         let mut group_b = vec![[0.0f64; C]; groups.normal.len()];
+        let mut group_b_back = vec![[0.0f64; C]; if backs > 0 { groups.normal.len() } else { 0 }];
         let mut group_a = vec![[0.0f64; C]; groups.normal.len() * nb];
         let pairs = self.pairs.as_ref();
         let ctx = self.sweep_context();
@@ -831,12 +950,12 @@ impl Prepared {
             // 1. Sender summaries: per normal group of every large node, the area-weighted sums of
             //    B and of each antiradiance bin (bottom-up, children before parents).
             groups.accumulate(
-                &radiance,
+                (&radiance, &radiance_back),
                 &anti,
                 live,
                 elem_area,
                 nb,
-                &mut group_b,
+                (&mut group_b, &mut group_b_back),
                 &mut group_a,
             );
 
@@ -845,7 +964,14 @@ impl Prepared {
                 .par_iter_mut()
                 .zip(links.cluster.par_iter())
                 .for_each(|(out, l)| {
-                    *out = ctx.pull(l, groups, &group_b, &group_a, &radiance, &anti);
+                    *out = ctx.pull(
+                        l,
+                        groups,
+                        (&group_b, &group_b_back),
+                        &group_a,
+                        (&radiance, &radiance_back),
+                        &anti,
+                    );
                 });
 
             // 3. Gather per element: exact links, then the cluster links into it and its ancestors,
@@ -853,34 +979,61 @@ impl Prepared {
             //    antiradiance goes to the link's bin, the one its sender reads when it passes it on).
             //    Only the element's stored bins are kept.
             let anti_out = split_by_start(&mut next_anti, &live.start);
+            let mut back_out: Vec<Option<&mut [f64; C]>> = if backs > 0 {
+                next_radiance_back.iter_mut().map(Some).collect()
+            } else {
+                (0..n).map(|_| None).collect()
+            };
             let change_parts: Vec<SweepSums> = next_radiance
                 .par_iter_mut()
                 .zip(anti_out.into_par_iter())
+                .zip(back_out.par_iter_mut())
                 .enumerate()
                 .map_init(
                     || vec![[0.0f64; C]; 2 * nb],
-                    |a_acc, (e, (b_out, a_out))| {
+                    |a_acc, (e, ((b_out, a_out), back_out))| {
                         a_acc[..nb].fill([0.0; C]);
                         let mut h = [0.0f64; C];
-                        let mut row = 0.0;
+                        let mut h_back = [0.0f64; C];
+                        let (mut row, mut row_back) = (0.0, 0.0);
                         for l in links.exact_start[e]..links.exact_start[e + 1] {
                             let s = links.exact_sender[l as usize] as usize;
-                            row += gather_entries(
+                            let (sender_back, receiver_back) = links.exact_faces_of(l as usize);
+                            let b_s = if sender_back {
+                                radiance_back[s]
+                            } else {
+                                radiance[s]
+                            };
+                            let (h, row) = if receiver_back {
+                                (&mut h_back, &mut row_back)
+                            } else {
+                                (&mut h, &mut row)
+                            };
+                            *row += gather_entries(
                                 links.exact_entries_of(l as usize),
-                                radiance[s],
+                                b_s,
                                 |bin| {
                                     live.slot(s, bin)
                                         .map_or([0.0; C], |k| anti[k].map(f64::from))
                                 },
                                 use_anti,
                                 two_sided || elem_back[s],
-                                &mut h,
+                                h,
                                 &mut a_acc[..nb],
                             );
                         }
+                        let row = f64::max(row, row_back);
+                        let two = elem_two.get(e).copied().unwrap_or(false);
                         let mut add = |l: &ClusterLink, i: &[f32; C], k: PairFactor| {
+                            // Negative: light arriving at a two-sided element's back face.
+                            let h = if k.irradiance < 0.0 {
+                                &mut h_back
+                            } else {
+                                &mut h
+                            };
+                            let f = (k.irradiance as f64).abs();
                             for c in 0..C {
-                                h[c] += k.irradiance as f64 * i[c] as f64;
+                                h[c] += f * i[c] as f64;
                             }
                             if k.anti != 0.0 {
                                 let bin = l.bin as usize;
@@ -890,6 +1043,21 @@ impl Prepared {
                             }
                         };
                         match pairs {
+                            // A two-sided element's factors route by their sign.
+                            Some(cache) if two => cache.for_each_node(e, |range, factors| {
+                                for ((j, l), &[f, g]) in
+                                    range.clone().zip(&links.cluster[range]).zip(factors)
+                                {
+                                    add(
+                                        l,
+                                        &intensity[j],
+                                        PairFactor {
+                                            irradiance: f,
+                                            anti: g,
+                                        },
+                                    );
+                                }
+                            }),
                             Some(cache) => {
                                 // A stream of multiply-adds: factors, intensities and bins
                                 // side by side (a factor of 0 adds nothing), alternate pairs
@@ -942,18 +1110,30 @@ impl Prepared {
                         }
                         let mut largest = 0.0f64;
                         let mut finite = true;
+                        let a = elem_area[e];
+                        let (mut num, mut den) = (0.0, 0.0);
                         for c in 0..C {
                             b_out[c] = emission[e][c] + albedo[e][c] * h[c];
                             largest = largest.max(b_out[c].abs());
                             finite &= b_out[c].is_finite();
                         }
+                        if let Some(back) = back_out.as_deref_mut() {
+                            for c in 0..C {
+                                back[c] = emission_back[e][c] + albedo[e][c] * h_back[c];
+                                largest = largest.max(back[c].abs());
+                                finite &= back[c].is_finite();
+                                num += a * (back[c] - radiance_back[e][c]).abs();
+                                den += a * back[c].abs();
+                            }
+                        }
                         for (dst, bin) in a_out.iter_mut().zip(live.bins_of(e)) {
                             *dst = a_acc[bin].map(|x| x as f32);
                             finite &= dst.iter().all(|x| x.is_finite());
                         }
-                        let a = elem_area[e];
-                        let num: f64 = (0..C).map(|c| a * (b_out[c] - radiance[e][c]).abs()).sum();
-                        let den: f64 = (0..C).map(|c| a * b_out[c].abs()).sum();
+                        num += (0..C)
+                            .map(|c| a * (b_out[c] - radiance[e][c]).abs())
+                            .sum::<f64>();
+                        den += (0..C).map(|c| a * b_out[c].abs()).sum::<f64>();
                         SweepSums {
                             num,
                             den,
@@ -972,7 +1152,9 @@ impl Prepared {
                 stats.max_row_sum = sums.max_row;
             }
             let change = change_ratio(sums.num, sums.den);
+            drop(back_out);
             std::mem::swap(&mut radiance, &mut next_radiance);
+            std::mem::swap(&mut radiance_back, &mut next_radiance_back);
             std::mem::swap(&mut anti, &mut next_anti);
             if end_sweep(
                 iteration,
@@ -998,18 +1180,26 @@ impl Prepared {
                 (&mut radiance, &next_radiance),
                 (&mut anti, &next_anti),
             );
+            if guard.damped() {
+                crate::solve::health::damp(&mut radiance_back, &next_radiance_back);
+            }
             match anderson.as_mut() {
                 // Anderson: the next state mixes the last sweeps' outputs.
                 Some(acc) => {
-                    pack(&next_radiance, &next_anti, &mut x_flat);
-                    pack(&radiance, &anti, &mut g_flat);
+                    pack(
+                        (&next_radiance, &next_radiance_back),
+                        &next_anti,
+                        &mut x_flat,
+                    );
+                    pack((&radiance, &radiance_back), &anti, &mut g_flat);
                     acc.step(&mut x_flat, &g_flat);
-                    unpack(&x_flat, &mut radiance, &mut anti);
+                    unpack(&x_flat, (&mut radiance, &mut radiance_back), &mut anti);
                 }
                 // Else, once the sweeps contract at a steady ratio, jump over the geometric tail.
                 None => {
                     if let Some(k) = convergence.extrapolation_factor() {
                         extrapolate(&mut radiance, &next_radiance, k);
+                        extrapolate(&mut radiance_back, &next_radiance_back, k);
                         extrapolate(&mut anti, &next_anti, k);
                         stats.extrapolations += 1;
                     }
@@ -1030,13 +1220,22 @@ impl Prepared {
         // Elements -> patches (area-weighted mean, RGB); patches without elements (inactive) get
         // 0 here and their emission from `solve_with_emission`.
         let radiance_rgb: Vec<[f64; 3]> = radiance.iter().map(|&b| rgb_of(b)).collect();
-        let patch_radiance: Vec<[f64; 3]> = crate::mesh::patch_means(
-            patches.len(),
-            (0..n).map(|e| (self.elem_patch[e] as usize, elem_area[e], radiance_rgb[e])),
-        )
-        .into_iter()
-        .map(|m| m.unwrap_or([0.0; 3]))
-        .collect();
+        let radiance_back_rgb: Vec<[f64; 3]> = radiance_back.iter().map(|&b| rgb_of(b)).collect();
+        let means = |values: &[[f64; 3]]| -> Vec<[f64; 3]> {
+            crate::mesh::patch_means(
+                patches.len(),
+                (0..values.len()).map(|e| (self.elem_patch[e] as usize, elem_area[e], values[e])),
+            )
+            .into_iter()
+            .map(|m| m.unwrap_or([0.0; 3]))
+            .collect()
+        };
+        let patch_radiance = means(&radiance_rgb);
+        let patch_radiance_back = if backs > 0 {
+            means(&radiance_back_rgb)
+        } else {
+            Vec::new()
+        };
         self.timings.iterate = t0.elapsed().as_secs_f64();
         stats.stage_seconds = Some(self.timings.clone());
         stats.link_stats = Some(crate::solve::solution::LinkReport {
@@ -1050,9 +1249,10 @@ impl Prepared {
         stats.memory = Some(memory);
         // The result is checked against the bound of this solve's source (with exact direct
         // light, the reflected direct light: a tighter bound than the emission's).
-        let solution = finish(
+        let solution = crate::solve::solution::finish_sides(
             patches,
             patch_radiance,
+            patch_radiance_back,
             stats,
             options.clamp_negative,
             bound,
@@ -1068,6 +1268,7 @@ impl Prepared {
         };
         let state = ElementState {
             radiance: radiance_rgb,
+            radiance_back: radiance_back_rgb,
             anti: anti.iter().flatten().copied().collect(),
             channels: C,
             source: elem_source.to_vec(),

@@ -49,6 +49,8 @@ pub(super) struct SweepContext<'a> {
     pub(super) elem_normal: &'a [DVec3],
     pub(super) elem_center: &'a [DVec3],
     pub(super) elem_back: &'a [bool],
+    /// Per element: two-sided (its back face gathers too); empty when none is.
+    pub(super) elem_two: &'a [bool],
     pub(super) use_anti: bool,
     pub(super) two_sided: bool,
 }
@@ -65,12 +67,13 @@ impl SweepContext<'_> {
     ) {
         let (n_e, x_e) = (self.elem_normal[e], self.elem_center[e]);
         let back = self.two_sided || self.elem_back[e];
+        let two = self.elem_two.get(e).copied().unwrap_or(false);
         let mut node = self.tree.elements[e];
         while node != NONE {
             let range = links.cluster_start[node as usize] as usize
                 ..links.cluster_start[node as usize + 1] as usize;
             for (i, l) in range.clone().zip(&links.cluster[range]) {
-                f(i, l, self.pair_factor(l, n_e, x_e, back));
+                f(i, l, self.pair_factor(l, n_e, x_e, back, two));
             }
             node = self.tree.nodes[node as usize].parent;
         }
@@ -80,7 +83,9 @@ impl SweepContext<'_> {
     /// `max(0, cos) / (pi (d^2 + spread))` per unit of the link's intensity, with the element's
     /// own direction and distance from the sender, and antiradiance `1 / ((d^2 + spread)
     /// Omega_bin)` in the link's bin where the light arrives at a side that creates it (the
-    /// front, and the back too when `back`).
+    /// front, and the back too when `back`). For a two-sided element (`two`), light arriving
+    /// at its back gives a negative irradiance factor: `-|cos| / (pi (d^2 + spread))`, the
+    /// irradiance of its back face.
     #[inline]
     pub(super) fn pair_factor(
         &self,
@@ -88,6 +93,7 @@ impl SweepContext<'_> {
         n_e: DVec3,
         x_e: DVec3,
         back: bool,
+        two: bool,
     ) -> PairFactor {
         let sender = &self.points[l.sender as usize];
         let v = x_e - sender.centroid();
@@ -97,7 +103,7 @@ impl SweepContext<'_> {
         }
         let cos = -n_e.dot(v) / d2.sqrt();
         let g = 1.0 / (d2 + sender.spread as f64);
-        let irradiance = if cos > 0.0 {
+        let irradiance = if cos > 0.0 || two {
             cos * g * std::f64::consts::FRAC_1_PI
         } else {
             0.0
@@ -114,15 +120,17 @@ impl SweepContext<'_> {
     }
 
     /// The radiant intensity a cluster link's sender sends along the link: B through the front of
-    /// every element, minus antiradiance through the back (both sides when two-sided).
-    #[allow(clippy::needless_range_loop)]
+    /// every element (and the back face's B through the back of two-sided ones), minus
+    /// antiradiance through the back (both sides when two-sided). `group_b_back` and
+    /// `radiance_back` are empty when no element is two-sided.
+    #[allow(clippy::needless_range_loop, clippy::too_many_arguments)]
     pub(super) fn pull<const C: usize>(
         &self,
         l: &ClusterLink,
         groups: &SenderGroups,
-        group_b: &[[f64; C]],
+        (group_b, group_b_back): (&[[f64; C]], &[[f64; C]]),
         group_a: &[[f64; C]],
-        radiance: &[[f64; C]],
+        (radiance, radiance_back): (&[[f64; C]], &[[f64; C]]),
         anti: &[[f32; C]],
     ) -> [f32; C] {
         let w = (self.points[l.receiver as usize].centroid()
@@ -130,10 +138,14 @@ impl SweepContext<'_> {
         .normalize_or_zero();
         let bin = l.bin as usize;
         let mut acc = [0.0f64; C];
-        let mut add = |cos: f64, b: [f64; C], a: [f64; C], both: bool| {
+        let mut add = |cos: f64, b: [f64; C], b_back: Option<[f64; C]>, a: [f64; C], both: bool| {
             if cos > 0.0 {
                 for c in 0..C {
                     acc[c] += cos * b[c];
+                }
+            } else if let Some(b_back) = b_back {
+                for c in 0..C {
+                    acc[c] -= cos * b_back[c];
                 }
             }
             if self.use_anti && (self.two_sided || both || cos < 0.0) {
@@ -149,6 +161,7 @@ impl SweepContext<'_> {
                 add(
                     groups.normal[g].dot(w),
                     group_b[g],
+                    group_b_back.get(g).copied(),
                     group_a[bin * groups.normal.len() + g],
                     groups.both[g],
                 );
@@ -164,6 +177,7 @@ impl SweepContext<'_> {
                 add(
                     self.elem_normal[e].dot(w),
                     radiance[e].map(|x| a * x),
+                    radiance_back.get(e).map(|b| b.map(|x| a * x)),
                     a_e,
                     self.elem_back[e],
                 );
@@ -173,22 +187,31 @@ impl SweepContext<'_> {
     }
 }
 
-/// Radiance and antiradiance state as one flat vector (radiance first, then the antiradiance
-/// slots in order).
-pub(super) fn pack<const C: usize>(radiance: &[[f64; C]], anti: &[[f32; C]], out: &mut Vec<f64>) {
+/// Radiance and antiradiance state as one flat vector (radiance first, then the back faces'
+/// radiance, then the antiradiance slots in order).
+pub(super) fn pack<const C: usize>(
+    (radiance, radiance_back): (&[[f64; C]], &[[f64; C]]),
+    anti: &[[f32; C]],
+    out: &mut Vec<f64>,
+) {
     out.clear();
     out.extend(radiance.iter().flatten());
+    out.extend(radiance_back.iter().flatten());
     out.extend(anti.iter().flatten().map(|&x| x as f64));
 }
 
 /// The inverse of [`pack`].
 pub(super) fn unpack<const C: usize>(
     flat: &[f64],
-    radiance: &mut [[f64; C]],
+    (radiance, radiance_back): (&mut [[f64; C]], &mut [[f64; C]]),
     anti: &mut [[f32; C]],
 ) {
-    let (b, a) = flat.split_at(radiance.len() * C);
-    for (dst, src) in radiance.iter_mut().zip(b.chunks_exact(C)) {
+    let (b, a) = flat.split_at((radiance.len() + radiance_back.len()) * C);
+    for (dst, src) in radiance
+        .iter_mut()
+        .chain(radiance_back.iter_mut())
+        .zip(b.chunks_exact(C))
+    {
         dst.copy_from_slice(src);
     }
     for (dst, src) in anti.iter_mut().zip(a.chunks_exact(C)) {

@@ -1,0 +1,227 @@
+//! Two-sided surfaces (`Scene::two_sided`, `--two-sided`, `--two-sided-material`): both faces
+//! of a triangle emit and reflect, each with its own radiance, and block light arriving at
+//! either. Checked on the occluder scene with its plate made two-sided: the plate's top is lit
+//! by the light, its underside by the floor. The hierarchical solver is checked against the
+//! dense oracle, against the same surface given as back-to-back one-sided twins, and against
+//! the path tracer; a one-sided surface keeps its absorbing back.
+
+use antiradiance::mesh::build_patches;
+use antiradiance::progress::Progress;
+use antiradiance::reference::{solve_reference, ReferenceOptions};
+use antiradiance::scene::generated::{occluder_scene, subdivide};
+use antiradiance::scene::Scene;
+use antiradiance::solve::solution::Solution;
+use antiradiance::solve::{run, SolverKind, SolverOptions};
+
+mod common;
+use common::{run as run_cli, s, stderr};
+
+/// Pieces per side of every triangle of the occluder scene.
+const K: usize = 3;
+
+/// The occluder scene split `K` x `K`, its plate (input triangles 2..4) two-sided.
+fn plate_scene() -> Scene {
+    let mut scene = subdivide(&occluder_scene(), K);
+    scene.two_sided = (0..scene.len()).map(plate).collect();
+    scene
+}
+
+/// True for the triangles of the plate in [`plate_scene`].
+fn plate(t: usize) -> bool {
+    (2 * K * K..4 * K * K).contains(&t)
+}
+
+fn solve(scene: &Scene, kind: SolverKind) -> Solution {
+    let patches = build_patches(scene, None);
+    run(
+        kind,
+        &patches,
+        &SolverOptions::default(),
+        &Progress::hidden(),
+    )
+    .expect("solves")
+}
+
+/// Area-weighted mean of `values` over the triangles `keep` selects.
+fn mean(scene: &Scene, values: &[[f64; 3]], keep: impl Fn(usize) -> bool) -> f64 {
+    let (mut num, mut den) = (0.0, 0.0);
+    for t in (0..scene.len()).filter(|&t| keep(t)) {
+        num += scene.area(t) * values[t][0];
+        den += scene.area(t);
+    }
+    num / den
+}
+
+/// Relative L1 difference of `a` against `b` over the triangles `keep` selects (area-weighted).
+fn difference(scene: &Scene, a: &[[f64; 3]], b: &[[f64; 3]], keep: impl Fn(usize) -> bool) -> f64 {
+    let (mut num, mut den) = (0.0, 0.0);
+    for t in (0..scene.len()).filter(|&t| keep(t)) {
+        num += scene.area(t) * (a[t][0] - b[t][0]).abs();
+        den += scene.area(t) * b[t][0].abs();
+    }
+    num / den
+}
+
+/// Floor triangles (not the light, not the plate).
+fn floor(t: usize) -> bool {
+    t >= 4 * K * K
+}
+
+#[test]
+fn two_sided_plate_has_a_lit_underside() {
+    let scene = plate_scene();
+    let two = solve(&scene, SolverKind::Hierarchical);
+    assert_eq!(two.triangle_radiance_back.len(), scene.len());
+    let underside = mean(&scene, &two.triangle_radiance_back, plate);
+    let top = mean(&scene, &two.triangle_radiance, plate);
+    eprintln!("underside {underside}, top {top}");
+    // The underside sees only the lit floor: dimmer than the top, but far from black.
+    assert!(
+        underside > 0.02 * top && underside < top,
+        "{underside} vs top {top}"
+    );
+    // One-sided triangles have no back face to light.
+    assert!((0..scene.len())
+        .filter(|&t| !plate(t))
+        .all(|t| two.triangle_radiance_back[t] == [0.0; 3]));
+    // The one-sided plate: no back faces reported, and its top is lit the same.
+    let one = solve(&subdivide(&occluder_scene(), K), SolverKind::Hierarchical);
+    assert!(one.triangle_radiance_back.is_empty());
+    let d = difference(
+        &scene,
+        &two.triangle_radiance,
+        &one.triangle_radiance,
+        plate,
+    );
+    assert!(d < 0.02, "top of the plate moved by {d}");
+}
+
+#[test]
+fn two_sided_plate_matches_the_dense_oracle() {
+    let scene = plate_scene();
+    let h = solve(&scene, SolverKind::Hierarchical);
+    let d = solve(&scene, SolverKind::Dense);
+    let front = difference(&scene, &h.triangle_radiance, &d.triangle_radiance, |t| {
+        t >= 2 * K * K
+    });
+    let back = difference(
+        &scene,
+        &h.triangle_radiance_back,
+        &d.triangle_radiance_back,
+        plate,
+    );
+    eprintln!("fronts {front:.5}, undersides {back:.5}");
+    assert!(front < 0.02, "fronts {front}");
+    assert!(back < 0.03, "undersides {back}");
+}
+
+#[test]
+fn two_sided_plate_matches_back_to_back_twins() {
+    // The same plate given as two one-sided surfaces back to back, as CAD exports write a
+    // two-sided one: the twin's radiance is the plate's underside.
+    let scene = plate_scene();
+    let mut twins = subdivide(&occluder_scene(), K);
+    let plate_tris: Vec<usize> = (0..twins.len()).filter(|&t| plate(t)).collect();
+    let mut twin_of = Vec::new();
+    for &t in &plate_tris {
+        let [a, b, c] = twins.corners(t);
+        let base = twins.positions.len() as u32;
+        twins.positions.extend_from_slice(&[a, c, b]);
+        twins.triangles.push([base, base + 1, base + 2]);
+        twins.albedo.push(twins.albedo[t]);
+        twins.emission.push(twins.emission[t]);
+        twins.material.push(None);
+        twin_of.push((t, twins.len() - 1));
+    }
+    let native = solve(&scene, SolverKind::Hierarchical);
+    let given = solve(&twins, SolverKind::Hierarchical);
+    let mut underside = vec![[0.0; 3]; scene.len()];
+    for &(t, twin) in &twin_of {
+        underside[t] = given.triangle_radiance[twin];
+    }
+    let n = scene.len();
+    let front = difference(
+        &scene,
+        &native.triangle_radiance,
+        &given.triangle_radiance[..n],
+        |t| t >= 2 * K * K,
+    );
+    let back = difference(&scene, &native.triangle_radiance_back, &underside, plate);
+    eprintln!("fronts {front:.5}, undersides {back:.5}");
+    assert!(front < 0.02, "fronts {front}");
+    assert!(back < 0.03, "undersides {back}");
+}
+
+#[test]
+fn two_sided_plate_matches_the_path_tracer() {
+    let scene = plate_scene();
+    let patches = build_patches(&scene, None);
+    let truth = solve_reference(
+        &patches,
+        &ReferenceOptions {
+            spp: 1024,
+            ..ReferenceOptions::default()
+        },
+        &Progress::hidden(),
+    );
+    let h = solve(&scene, SolverKind::Hierarchical);
+    let under_h = mean(&scene, &h.triangle_radiance_back, plate);
+    let under_t = mean(&scene, &truth.triangle_radiance_back, plate);
+    let floor_error = difference(
+        &scene,
+        &h.triangle_radiance,
+        &truth.triangle_radiance,
+        floor,
+    );
+    eprintln!("underside {under_h} vs path tracer {under_t}, floor error {floor_error}");
+    assert!(
+        (under_h / under_t - 1.0).abs() < 0.05,
+        "underside {under_h} vs path tracer {under_t}"
+    );
+    assert!(floor_error < 0.05, "floor {floor_error}");
+}
+
+#[test]
+fn cli_two_sided_material_adds_back_columns_and_rejects_unknown_names() {
+    let dir = tempfile::tempdir().unwrap();
+    let obj = dir.path().join("occluder.obj");
+    antiradiance::scene::write_obj::write_obj(&occluder_scene(), &obj, "occluder").unwrap();
+    let text = std::fs::read_to_string(&obj).unwrap();
+    let material = text
+        .lines()
+        .filter_map(|l| l.strip_prefix("usemtl "))
+        .nth(1)
+        .expect("the plate's material")
+        .to_string();
+    let csv = dir.path().join("out.csv");
+    let o = run_cli(&[
+        "solve",
+        s(&obj),
+        "--two-sided-material",
+        &material,
+        "--triangles",
+        s(&csv),
+        "-q",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = std::fs::read_to_string(&csv).unwrap();
+    assert_eq!(
+        out.lines().next(),
+        Some("index,area,emissive,r,g,b,back_r,back_g,back_b")
+    );
+    let o = run_cli(&[
+        "solve",
+        s(&obj),
+        "--two-sided-material",
+        "no_such_material",
+        "--triangles",
+        s(&csv),
+        "-q",
+    ]);
+    assert!(!o.status.success());
+    let err = stderr(&o);
+    assert!(
+        err.contains("no_such_material") && err.lines().count() == 1,
+        "{err}"
+    );
+}
