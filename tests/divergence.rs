@@ -56,10 +56,19 @@ impl Build {
 
     /// Every triangle followed by its reversed twin, back to back (same material).
     fn twinned(&self) -> Build {
+        self.twinned_at(0.0)
+    }
+
+    /// [`Build::twinned`] with each reversed copy moved by `gap` (scene units) along its own
+    /// normal: for a gap of 1e-9 a pair that is back to back within any tolerance but not bit
+    /// for bit, so it is solved as two one-sided surfaces instead of one two-sided one.
+    fn twinned_at(&self, gap: f64) -> Build {
         let mut b = Build::default();
         for t in 0..self.tris.len() {
             let [p, q, r] = self.tris[t];
-            for tri in [[p, q, r], [p, r, q]] {
+            let n = (q - p).cross(r - p).normalize_or_zero();
+            let shift = -n * gap;
+            for tri in [[p, q, r], [p + shift, r + shift, q + shift]] {
                 b.tris.push(tri);
                 b.albedo.push(self.albedo[t]);
                 b.emission.push(self.emission[t]);
@@ -394,19 +403,29 @@ fn back_to_back_twins_of_the_cornell_box() {
 /// A room with Venetian blinds, as given and with every triangle doubled by its reversed twin:
 /// the stacked slats (and their twins) make the unoccluded rows sum to 2.5 (5 doubled), and the
 /// plain sweeps of the dense solver diverge even on the one-sided blinds. Every solve must end
-/// within the bound or report its failure; on the twins at least one solver fails.
+/// within the bound or report its failure. Exact twins are merged into two-sided slats and
+/// converge; twins 1e-9 apart stay two one-sided surfaces, and at least one solver fails.
 #[test]
 fn back_to_back_twins_of_venetian_blinds() {
     let blinds = blinds_room(30);
     let one_sided = blinds.scene();
-    let twins = blinds.twinned().scene();
     check_all("blinds", &one_sided, &front_only());
+    let merged = blinds.twinned().scene();
+    assert_eq!(
+        failures(&check_all("blinds exact twins", &merged, &front_only())),
+        0,
+        "exact twins are solved as two-sided slats"
+    );
+    let twins = blinds.twinned_at(NEAR_TWIN_GAP).scene();
     let mut failed = 0;
     for options in [front_only(), two_sided()] {
         failed += failures(&check_all("blinds twins", &twins, &options));
     }
     assert!(failed > 0, "the twin blinds diverge in some solver");
 }
+
+/// The gap of the near twins that are not merged ([`Build::twinned_at`]).
+const NEAR_TWIN_GAP: f64 = 1e-9;
 
 /// The one-sided blinds with the dense solver: its plain sweeps oscillate with a growing
 /// amplitude (an eigenvalue below -1, from slats that block light at both sides; they reached
@@ -561,7 +580,7 @@ fn convex_furnace_rows_stay_under_the_tolerance() {
 /// precomputed light whose solve failed is an error and is not added.
 #[test]
 fn relighting_a_diverging_scene_fails_cleanly() {
-    let twins = blinds_room(30).twinned().scene();
+    let twins = blinds_room(30).twinned_at(NEAR_TWIN_GAP).scene();
     let mut relighter = Relighter::new(&twins, None, &two_sided()).unwrap();
     let first = relighter.solve(&Progress::hidden());
     let failure = first
@@ -601,7 +620,7 @@ fn diverging_solve_on_the_command_line_writes_no_result() {
     let dir = tempfile::tempdir().unwrap();
     let obj = dir.path().join("blinds_twins.obj");
     generated::write_obj(
-        &blinds_room(30).twinned().scene(),
+        &blinds_room(30).twinned_at(NEAR_TWIN_GAP).scene(),
         &obj,
         "blinds doubled back to back",
     )

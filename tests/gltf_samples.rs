@@ -19,12 +19,16 @@ fn load(name: &str) -> Option<Scene> {
     Some(load_scene(&path, &SceneOptions::default()).unwrap_or_else(|e| panic!("{name}: {e}")))
 }
 
-fn double_sided_warnings(scene: &Scene) -> usize {
-    scene
-        .warnings
-        .iter()
-        .filter(|w| w.contains("doubleSided"))
-        .count()
+/// The materials of two-sided triangles (glTF `doubleSided`); asserts nothing warns of them.
+fn two_sided_materials(scene: &Scene) -> usize {
+    assert!(scene.warnings.iter().all(|w| !w.contains("doubleSided")));
+    let mut materials: Vec<Option<u32>> = (0..scene.len())
+        .filter(|&t| scene.is_two_sided(t))
+        .map(|t| scene.material[t])
+        .collect();
+    materials.sort();
+    materials.dedup();
+    materials.len()
 }
 
 #[test]
@@ -140,7 +144,7 @@ fn orientation_truck_and_attenuation_panels_load() {
         assert!(size.x > size.y || size.z > size.y, "{size:?}");
     }
     if let Some(s) = load("AttenuationTest/AttenuationTest.glb") {
-        assert_eq!(double_sided_warnings(&s), 5);
+        assert_eq!(two_sided_materials(&s), 5);
     }
 }
 
@@ -166,7 +170,7 @@ fn punctual_lamp_lights_and_emissive_texture() {
         s.emitter_count() > 0,
         "the emissive texture lights some triangles"
     );
-    assert_eq!(double_sided_warnings(&s), 3);
+    assert_eq!(two_sided_materials(&s), 3);
 }
 
 #[test]
@@ -199,13 +203,14 @@ fn emissive_strength_test_scales_by_strength() {
 }
 
 #[test]
-fn double_sided_and_texture_coordinate_samples_warn() {
+fn double_sided_samples_are_two_sided() {
     if let Some(s) = load("TwoSidedPlane/TwoSidedPlane.gltf") {
         assert_eq!(s.len(), 2);
-        assert_eq!(double_sided_warnings(&s), 1);
+        assert_eq!(two_sided_materials(&s), 1);
+        assert!((0..s.len()).all(|t| s.is_two_sided(t)));
     }
     if let Some(s) = load("TextureCoordinateTest/TextureCoordinateTest.glb") {
-        assert_eq!(double_sided_warnings(&s), 5);
+        assert_eq!(two_sided_materials(&s), 5);
     }
 }
 

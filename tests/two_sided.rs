@@ -118,7 +118,8 @@ fn two_sided_plate_matches_the_dense_oracle() {
 #[test]
 fn two_sided_plate_matches_back_to_back_twins() {
     // The same plate given as two one-sided surfaces back to back, as CAD exports write a
-    // two-sided one: the twin's radiance is the plate's underside.
+    // two-sided one: the pairs are merged into two-sided triangles (no extra elements), and
+    // each twin is reported with the plate's underside.
     let scene = plate_scene();
     let mut twins = subdivide(&occluder_scene(), K);
     let plate_tris: Vec<usize> = (0..twins.len()).filter(|&t| plate(t)).collect();
@@ -135,6 +136,13 @@ fn two_sided_plate_matches_back_to_back_twins() {
     }
     let native = solve(&scene, SolverKind::Hierarchical);
     let given = solve(&twins, SolverKind::Hierarchical);
+    let (p_native, p_given) = (build_patches(&scene, None), build_patches(&twins, None));
+    assert_eq!(p_native.active_count(), p_given.active_count());
+    assert_eq!(
+        p_given.back_twin.iter().flatten().count(),
+        twin_of.len(),
+        "every twin merged"
+    );
     let mut underside = vec![[0.0; 3]; scene.len()];
     for &(t, twin) in &twin_of {
         underside[t] = given.triangle_radiance[twin];

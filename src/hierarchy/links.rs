@@ -760,7 +760,17 @@ pub fn refine(
         scratch: &mut Coupling,
         row: &mut Row,
     ) {
-        let flipped = sender_two_sided.then(|| sender.flipped());
+        // The sender's back is seen only from receiver points behind its plane, and the
+        // receiver's back only sees what lies behind the receiver's plane.
+        let behind = |of: &PatchGeom, corners: &[glam::DVec3; 3]| {
+            let tol = crate::geometry::plane_tol(of.size.max(receiver.geom.size));
+            corners
+                .iter()
+                .any(|&c| of.normal.dot(c - of.corners[0]) < -tol)
+        };
+        let flipped =
+            (sender_two_sided && behind(sender, &receiver.geom.corners)).then(|| sender.flipped());
+        let receiver_back = receiver_back.filter(|_| behind(&receiver.geom, &sender.corners));
         let keep = |scratch: &mut Coupling, radiance_only: bool, antiradiance_out: bool| {
             for e in scratch.iter_mut() {
                 if radiance_only {
@@ -811,7 +821,9 @@ pub fn refine(
             );
             row.q = receiver.quadrature();
             // A two-sided receiver's back face is integrated over the same points.
-            let receiver_back = two_sided[r].then(|| Receiver::new(geoms[r].flipped(), row.q));
+            // (It gathers radiance only: the front's coupling holds the receiver's antiradiance.)
+            let receiver_back =
+                two_sided[r].then(|| Receiver::new(geoms[r].flipped().blocking_back(false), row.q));
             for &(_, s) in pairs {
                 row.points += receiver.points_for(&geoms[s as usize]) as u64;
                 couple(&receiver, &geoms[s as usize], bins, coupling, scratch);

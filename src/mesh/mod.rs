@@ -63,6 +63,11 @@ pub struct Patches {
     /// Per input triangle, the earlier triangle it duplicates ([`Scene::duplicates`]): its
     /// patches are inactive and it takes that triangle's radiance.
     pub twin: Vec<Option<u32>>,
+    /// Per input triangle, the earlier triangle whose back face it is
+    /// ([`Scene::back_to_back_twins`]): its patches are inactive, the earlier triangle is
+    /// two-sided, and it is reported with that triangle's back face (and its back with the
+    /// triangle's front).
+    pub back_twin: Vec<Option<u32>>,
     /// Per patch, the reflected direct radiance of the scene's analytic lights
     /// ([`lights::direct_source`], normalized like `emission`): a source the solvers add
     /// to the emission. Empty when the scene has no analytic light.
@@ -346,17 +351,22 @@ pub fn build_patches(scene: &Scene, max_edge: Option<f64>) -> Patches {
         frame,
         emission_scale,
         twin: scene.duplicates(),
+        back_twin: scene.back_to_back_twins(),
         ..Patches::default()
     };
+    let mut has_back_twin = vec![false; scene.len()];
+    for &u in patches.back_twin.iter().flatten() {
+        has_back_twin[u as usize] = true;
+    }
     for t in 0..scene.len() {
         patches.first.push(patches.len() as u32);
         let world = scene.corners(t);
         let unit: Tri = world.map(|p| frame.unit_from_world(p));
         let emission = scene.emission[t].map(|e| e / emission_scale);
         let degenerate = scene.is_degenerate(t);
-        let active = !degenerate && patches.twin[t].is_none();
+        let active = !degenerate && patches.twin[t].is_none() && patches.back_twin[t].is_none();
         let k = split_factor(&world, degenerate, max_edge) as usize;
-        let two_sided = scene.is_two_sided(t);
+        let two_sided = scene.is_two_sided(t) || has_back_twin[t];
         for piece in geometry::subdivide(&unit, k) {
             patches.push(piece, t as u32, scene.albedo[t], emission, active);
             patches.two_sided.push(two_sided);

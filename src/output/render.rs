@@ -529,11 +529,23 @@ fn rasterize(patches: &Patches, solution: &Solution, welded: Option<&Welded>, vi
             continue; // zero area: nothing to draw
         }
         let world = patches.corners[p].map(|c| patches.frame.world_from_unit(c));
-        let front = patches.normal[p].dot(eye - world[0]) > 0.0;
-        let b = patch_b(solution, p);
+        let facing = patches.normal[p].dot(eye - world[0]) > 0.0;
+        // A two-sided patch seen from behind shows its back face, lit as a front (flat).
+        let back_face = !facing && patches.is_two_sided(p);
+        let front = facing || back_face;
+        let b = if back_face {
+            solution
+                .patch_radiance_back
+                .get(p)
+                .copied()
+                .unwrap_or([0.0; 3])
+                .map(sanitize)
+        } else {
+            patch_b(solution, p)
+        };
         let attrs = match welded {
-            Some(wd) => wd.faces[p].map(|v| wd.radiance[v as usize]),
-            None => [b; 3],
+            Some(wd) if !back_face => wd.faces[p].map(|v| wd.radiance[v as usize]),
+            _ => [b; 3],
         };
         let verts: [ClipVertex; 3] = [0, 1, 2].map(|k| (cam.to_camera(world[k]), attrs[k]));
         // Sutherland-Hodgman against the near plane z = near.

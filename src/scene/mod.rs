@@ -399,6 +399,42 @@ impl Scene {
         }
     }
 
+    /// Per triangle, the earlier triangle it is the back-to-back twin of, if any: the same
+    /// corners in the reverse order (bit for bit), the same albedo and emission, neither a
+    /// duplicate ([`Scene::duplicates`]) nor already paired. Such a pair is one two-sided
+    /// surface given as two one-sided ones (as CAD exports write it); the patches merge it
+    /// into the earlier triangle made two-sided, whose back face is the twin
+    /// ([`crate::mesh::Patches::back_twin`]).
+    pub fn back_to_back_twins(&self) -> Vec<Option<u32>> {
+        let key = |p: DVec3| p.to_array().map(|x| (x + 0.0).to_bits());
+        let canonical = |k: [[u64; 3]; 3]| {
+            let start = (0..3).min_by_key(|&i| k[i]).unwrap_or(0);
+            [k[start], k[(start + 1) % 3], k[(start + 2) % 3]]
+        };
+        let duplicates = self.duplicates();
+        let mut first: HashMap<[[u64; 3]; 3], u32> = HashMap::with_capacity(self.len());
+        let mut twin = vec![None; self.len()];
+        let mut paired = vec![false; self.len()];
+        for t in 0..self.len() {
+            if self.is_degenerate(t) || duplicates[t].is_some() {
+                continue;
+            }
+            let [a, b, c] = self.corners(t).map(key);
+            let same =
+                |u: usize| self.albedo[u] == self.albedo[t] && self.emission[u] == self.emission[t];
+            match first.get(&canonical([a, c, b])) {
+                Some(&u) if !paired[u as usize] && same(u as usize) => {
+                    twin[t] = Some(u);
+                    paired[u as usize] = true;
+                }
+                _ => {
+                    first.entry(canonical([a, b, c])).or_insert(t as u32);
+                }
+            }
+        }
+        twin
+    }
+
     /// For every triangle, the first earlier triangle it duplicates, if any: same three corner
     /// positions (bit for bit) in the same cyclic order, i.e. the same surface facing the same
     /// way. Degenerate triangles are never duplicates.
@@ -407,7 +443,7 @@ impl Scene {
     /// would reflect the light they receive twice and, in front-only antiradiance, both send
     /// the antiradiance that cancels the light behind them, which then cancels it twice (a
     /// doubled plate made the shadow under it negative). Back-to-back copies (reversed corner
-    /// order, a thin two-sided wall) are not duplicates and are solved as they are.
+    /// order, a thin two-sided wall) are not duplicates: see [`Scene::back_to_back_twins`].
     pub fn duplicates(&self) -> Vec<Option<u32>> {
         // `+ 0.0` turns -0.0 into 0.0, so that equal coordinates get equal keys.
         let key = |p: DVec3| p.to_array().map(|x| (x + 0.0).to_bits());

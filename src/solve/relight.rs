@@ -235,6 +235,11 @@ impl Relighter {
         mesh::check_scene(scene)?;
         check_lights(scene)?;
         options.validate()?;
+        if patches.has_two_sided() && !scene.lights.is_empty() {
+            return Err(Error::Parameter(
+                "relighting a scene with two-sided surfaces and analytic lights is not supported (the lights' direct light on back faces is not recomputed); solve it instead".into(),
+            ));
+        }
         if patches.first.len() != scene.len() + 1
             || patches.parent.len() != patches.len()
             || patches.parent.iter().any(|&t| t as usize >= scene.len())
@@ -572,9 +577,10 @@ impl Relighter {
             warm = None;
         }
         self.sync_patches(&source, lighting);
-        let elem_source = self
-            .prepared
-            .element_source(&self.patches.emission_and_source());
+        let elem_source = self.prepared.element_source_sides(
+            &self.patches.emission_and_source(),
+            &self.patches.emission_and_source_back(),
+        );
         // Nothing changed since a converged solve: its solution stands.
         if let (Some(w), Some(solution)) = (&warm, last) {
             if w.source() == elem_source.as_slice() {
@@ -754,6 +760,11 @@ impl Relighter {
         if self.analytic_lit() {
             return Err(Error::Parameter(
                 "mix() combines precomputed emission lights, and the scene's analytic lights are lit; set their colour to 0 or solve() instead".into(),
+            ));
+        }
+        if self.patches.has_two_sided() {
+            return Err(Error::Parameter(
+                "mix() keeps the front faces of its precomputed lights only, and the scene has two-sided surfaces; solve() instead".into(),
             ));
         }
         if intensities.len() != self.lights.len() {

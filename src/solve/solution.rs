@@ -215,7 +215,7 @@ impl Solution {
                     }
                 })
                 .collect();
-            solution.triangle_radiance_back = patches.to_input(&solution.patch_radiance_back);
+            solution.settle_inactive(patches);
         }
         solution
     }
@@ -236,7 +236,6 @@ impl Solution {
             stats: self.stats,
         };
         solution.settle_inactive(patches);
-        solution.triangle_radiance_back = patches.to_input(&solution.patch_radiance_back);
         solution
     }
 
@@ -270,10 +269,28 @@ impl Solution {
             }
         }
         self.triangle_radiance = patches.to_input(&self.patch_radiance);
+        if self.patch_radiance_back.len() == patches.len() {
+            self.triangle_radiance_back = patches.to_input(&self.patch_radiance_back);
+        }
+        // A back-to-back twin shows the back face of the triangle it pairs with, and that
+        // triangle's front from behind.
+        let faces = self.triangle_radiance_back.len() == self.triangle_radiance.len();
+        for (u, t) in patches.back_twin.iter().enumerate() {
+            if let (Some(t), true) = (t, faces) {
+                let t = *t as usize;
+                self.triangle_radiance[u] = self.triangle_radiance_back[t];
+                self.triangle_radiance_back[u] = self.triangle_radiance[t];
+            }
+        }
         for p in 0..patches.len() {
             let t = patches.parent[p] as usize;
-            if !patches.active[p] && patches.twin.get(t).is_some_and(Option::is_some) {
+            let copies = patches.twin.get(t).is_some_and(Option::is_some)
+                || patches.back_twin.get(t).is_some_and(Option::is_some);
+            if !patches.active[p] && copies {
                 self.patch_radiance[p] = self.triangle_radiance[t];
+                if let Some(back) = self.patch_radiance_back.get_mut(p) {
+                    *back = self.triangle_radiance_back[t];
+                }
             }
         }
     }

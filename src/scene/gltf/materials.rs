@@ -5,8 +5,8 @@ use std::collections::HashMap;
 use std::path::Path;
 
 use super::data::read_uri;
-use super::{scene_err, warn};
-use crate::error::{Result, Warning, WarningKind};
+use super::scene_err;
+use crate::error::Result;
 use crate::scene::lights::LUMENS_PER_WATT;
 use crate::scene::texture::{Sampling, Texture, Wrap};
 
@@ -39,7 +39,6 @@ pub(super) fn read_materials(
     base: &Path,
     doc: &gltf::Document,
     buffers: &[Vec<u8>],
-    warnings: &mut Vec<Warning>,
 ) -> Result<(Vec<MaterialInfo>, HashMap<usize, Texture>)> {
     let mut images = Images {
         path,
@@ -83,14 +82,6 @@ pub(super) fn read_materials(
                 path,
                 format!("materials[{i}] ('{name}'): colour factors must be finite and >= 0"),
             ));
-        }
-        if m.double_sided() {
-            warn(
-                warnings,
-                path,
-                WarningKind::Unsupported,
-                format!("material '{name}' is doubleSided: solved one-sided (front = counter-clockwise), its back absorbs"),
-            );
         }
         materials.push(MaterialInfo {
             name,

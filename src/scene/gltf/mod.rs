@@ -25,7 +25,8 @@
 //!   (candela) become [`Light::Point`] / [`Light::Spot`] with intensity cd / 683 W/sr,
 //!   directional lights (lux) become [`Light::Sun`] with irradiance lux / 683 W/m^2. A light's
 //!   `range` is ignored (with a warning): the model's lights fall off as 1 / r^2 everywhere.
-//! - `doubleSided` materials are solved one-sided (front = counter-clockwise), with a warning.
+//! - `doubleSided` materials are two-sided surfaces ([`Scene::two_sided`]): both faces emit and
+//!   reflect, each with its own radiance.
 //!
 //! Bad files give one-line errors naming the file and, where known, the JSON path (for example
 //! `meshes[0].primitives[1].indices`) or byte offset: bad GLB header or truncated file, JSON
@@ -107,7 +108,7 @@ pub fn load_gltf(path: &Path, options: &SceneOptions) -> Result<Scene> {
             warn(&mut warnings, path, WarningKind::Unsupported, "KHR_texture_transform is used but not applied: textures are averaged with untransformed UVs".into());
         }
     }
-    let (materials, images) = read_materials(path, &base, &document, &buffers, &mut warnings)?;
+    let (materials, images) = read_materials(path, &base, &document, &buffers)?;
     let Some(gscene) = document
         .default_scene()
         .or_else(|| document.scenes().next())
@@ -419,6 +420,7 @@ impl Loader<'_> {
             let t = if mirrored { [t[0], t[2], t[1]] } else { *t };
             self.scene.triangles.push(t.map(|i| base_index + i as u32));
             self.scene.material.push(material_id);
+            self.scene.two_sided.push(material.double_sided());
             let (albedo, emission) =
                 self.colours_of(info, t, base_uv.as_deref(), emissive_uv.as_deref(), &colors);
             self.scene.albedo.push(albedo);
