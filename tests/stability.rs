@@ -408,9 +408,10 @@ fn sliver_strip_matches_a_wider_strip() {
 /// negative radiance under the plate). Now the copy takes no part in transport and gets its
 /// twin's radiance: the solution is the one without the copy.
 ///
-/// Reversed orientation (a two-sided plate): legitimate, solved as it is. The top is unchanged,
-/// the underside is lit by the floor, the floor gets a little more light (the underside
-/// reflects some back), never less.
+/// Reversed orientation (a two-sided plate given as two one-sided ones): merged into one
+/// two-sided plate, the copy reporting its underside. The top is unchanged, the underside is
+/// lit by the floor, the floor gets a little more light (the underside reflects some back),
+/// never less.
 #[test]
 fn coincident_triangles() {
     let base = generated::occluder_scene();

@@ -48,6 +48,13 @@ pub fn solve_dense(
     options: &SolverOptions,
     progress: &Progress,
 ) -> Result<Solution> {
+    if patches.has_two_sided() {
+        // The oracle solves two-sided patches as the back-to-back pairs of one-sided patches
+        // they are equivalent to (each pair's faces cover each other's backs).
+        let (expanded, back_of) = patches.with_back_faces();
+        let solution = solve_dense(&expanded, options, progress)?;
+        return Ok(solution.fold_back_faces(patches, &back_of));
+    }
     let bins = Bins::new(options.bins);
     let nb = bins.len();
     let n = patches.len();

@@ -101,13 +101,6 @@ pub fn run(
     options: &SolverOptions,
     progress: &Progress,
 ) -> Result<Solution> {
-    if kind == SolverKind::Dense && patches.has_two_sided() {
-        // The oracle solves two-sided patches as the back-to-back pairs of one-sided patches
-        // they are equivalent to (each pair's faces cover each other's backs).
-        let (expanded, back_of) = patches.with_back_faces();
-        let solution = run(kind, &expanded, options, progress)?;
-        return Ok(solution.fold_back_faces(patches, &back_of));
-    }
     let solution = match (kind, options.direct_light) {
         (SolverKind::Dense, false) => dense::solve_dense(patches, options, progress),
         (SolverKind::Hierarchical, false) => {

@@ -51,13 +51,44 @@ pub const EXPOSED_SHARE: f64 = 0.25;
 pub fn exposed_backs(patches: &Patches) -> Vec<bool> {
     let twinned = back_to_back_twins(patches);
     let scene = RayScene::new(&patches.corners, &patches.active);
+    let candidates: Vec<bool> = (0..patches.len())
+        .map(|p| patches.active[p] && !twinned[p])
+        .collect();
+    // Hits on fronts first; then, for two-sided patches still unexposed, hits on the back
+    // faces of two-sided patches found exposed (lit) count too.
+    let mut exposed = exposed_where(patches, &scene, &candidates, |hit, dir| {
+        patches.normal[hit].dot(dir) < 0.0
+    });
+    if patches.has_two_sided() {
+        let again: Vec<bool> = (0..patches.len())
+            .map(|p| candidates[p] && !exposed[p] && patches.is_two_sided(p))
+            .collect();
+        let first = exposed.clone();
+        let second = exposed_where(patches, &scene, &again, |hit, dir| {
+            patches.normal[hit].dot(dir) < 0.0 || (patches.is_two_sided(hit) && first[hit])
+        });
+        for (e, s) in exposed.iter_mut().zip(second) {
+            *e |= s;
+        }
+    }
+    exposed
+}
+
+/// [`exposed_backs`]'s ray test for the patches marked in `candidates` (false for the others),
+/// `lit(hit, dir)` telling whether a back ray in direction `dir` met a lit face of patch `hit`.
+fn exposed_where(
+    patches: &Patches,
+    scene: &RayScene,
+    candidates: &[bool],
+    lit: impl Fn(usize, DVec3) -> bool + Sync,
+) -> Vec<bool> {
     let active = patches.active_count().max(1);
     let rays = (BACK_RAY_BUDGET / active).clamp(BACK_RAYS_MIN, BACK_RAYS_MAX);
     let side = (rays as f64).sqrt().ceil() as usize;
     (0..patches.len())
         .into_par_iter()
         .map(|p| {
-            if !patches.active[p] || twinned[p] || patches.is_two_sided(p) {
+            if !candidates[p] {
                 return false;
             }
             let (tri, n) = (&patches.corners[p], patches.normal[p]);
@@ -72,8 +103,7 @@ pub fn exposed_backs(patches: &Patches) -> Vec<bool> {
                 let dir = cosine_direction(-n, rng.next_f64(), rng.next_f64());
                 if let Some(hit) = scene.closest(org, dir, p) {
                     hits += 1;
-                    // A two-sided patch's faces are both fronts: they reflect.
-                    if patches.normal[hit.patch].dot(dir) < 0.0 || patches.is_two_sided(hit.patch) {
+                    if lit(hit.patch, dir) {
                         fronts += 1;
                     }
                 }
@@ -114,22 +144,66 @@ fn back_to_back_twins(patches: &Patches) -> Vec<bool> {
         .collect()
 }
 
-/// Per patch: it blocks light arriving at its back. [`exposed_backs`] when
-/// `options.block_exposed_backs` (and antiradiance is on), every patch when `options.two_sided`,
-/// none otherwise; two-sided patches ([`Patches::two_sided`]) always (with antiradiance).
-/// Shared by both solvers.
+/// Per patch: it blocks light arriving at its back ([`Backs::blocking`]). Shared by both
+/// solvers.
 pub fn back_blocking(patches: &Patches, options: &crate::solve::SolverOptions) -> Vec<bool> {
-    let mut blocking = if options.two_sided || !options.antiradiance || !options.block_exposed_backs
-    {
-        vec![options.two_sided; patches.len()]
-    } else {
-        exposed_backs(patches)
-    };
-    // A two-sided patch blocks light arriving at either face.
-    for (p, b) in blocking.iter_mut().enumerate() {
-        *b |= options.antiradiance && patches.is_two_sided(p);
+    Backs::of(patches, options).blocking
+}
+
+/// What the solvers model at the patches' backs.
+#[derive(Clone, Debug)]
+pub struct Backs {
+    /// Per patch: it blocks light arriving at its back. [`exposed_backs`] when
+    /// `options.block_exposed_backs` (and antiradiance is on), every patch when
+    /// `options.two_sided`, none otherwise; and every patch with a back face.
+    pub blocking: Vec<bool>,
+    /// Per patch: a two-sided patch ([`Patches::two_sided`]) whose back face is solved: its
+    /// back is exposed to light ([`exposed_backs`], or an analytic light shines on it, see
+    /// [`lit_from_behind`]) or it emits. The back face of a two-sided patch that no light can
+    /// reach (a wall's outside, the inside of a closed object) stays dark, and costs nothing.
+    /// Every two-sided patch when `options.block_exposed_backs` is off or antiradiance is.
+    pub faces: Vec<bool>,
+}
+
+impl Backs {
+    /// The backs of `patches` under `options` (one [`exposed_backs`] test for both).
+    pub fn of(patches: &Patches, options: &crate::solve::SolverOptions) -> Backs {
+        let n = patches.len();
+        let test = options.antiradiance && options.block_exposed_backs && !options.two_sided;
+        let exposed = if test {
+            exposed_backs(patches)
+        } else {
+            vec![false; n]
+        };
+        let faces: Vec<bool> = (0..n)
+            .map(|p| {
+                patches.is_two_sided(p)
+                    && (!test
+                        || exposed[p]
+                        || patches.emission[p].iter().any(|&e| e > 0.0)
+                        || lit_from_behind(patches, p))
+            })
+            .collect();
+        let blocking = (0..n)
+            .map(|p| {
+                options.antiradiance
+                    && (options.two_sided || (exposed[p] && !patches.is_two_sided(p)) || faces[p])
+            })
+            .collect();
+        Backs { blocking, faces }
     }
-    blocking
+}
+
+/// True when an analytic light of `patches` can shine on patch `p`'s back: a point or spot
+/// light behind its plane, a sun whose light travels into its back, or a sky.
+pub fn lit_from_behind(patches: &Patches, p: usize) -> bool {
+    use crate::scene::lights::Light;
+    let (n, x) = (patches.normal[p], patches.corners[p][0]);
+    patches.lights.iter().any(|light| match *light {
+        Light::Point { position, .. } | Light::Spot { position, .. } => n.dot(position - x) < 0.0,
+        Light::Sun { direction, .. } => n.dot(direction) > 0.0,
+        Light::Sky { .. } => true,
+    })
 }
 
 pub use crate::geometry::tolerances::CONVEX_TOLERANCE;

@@ -162,6 +162,12 @@ pub fn solve_dense_direct(
     options: &SolverOptions,
     progress: &Progress,
 ) -> Result<Solution> {
+    if patches.has_two_sided() {
+        // As `dense::solve_dense`: back faces as one-sided patches of their own.
+        let (expanded, back_of) = patches.with_back_faces();
+        let solution = solve_dense_direct(&expanded, options, progress)?;
+        return Ok(solution.fold_back_faces(patches, &back_of));
+    }
     let receivers = patch_receivers(patches);
     let budget = Budget::start(options.memory_limit());
     // The dense solve, and the copy of the patches that carries its source.

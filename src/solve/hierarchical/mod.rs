@@ -319,11 +319,11 @@ impl Prepared {
         let bins = Bins::new(options.bins);
         let t0 = Instant::now();
         let mut tree = ClusterTree::build(patches);
-        let back_blocking = model::back_blocking(patches, options);
+        let model::Backs {
+            blocking: back_blocking,
+            faces: two_sided,
+        } = model::Backs::of(patches, options);
         tree.mark_back_blocking(&back_blocking);
-        let two_sided: Vec<bool> = (0..patches.len())
-            .map(|p| patches.is_two_sided(p))
-            .collect();
         tree.mark_two_sided(&two_sided);
         let t1 = Instant::now();
         let links = links::refine(
