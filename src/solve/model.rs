@@ -44,125 +44,73 @@ pub const EXPOSED_SHARE: f64 = 0.25;
 /// `2 SCENE_EPS` in front of it); a patch with a back-to-back twin (the same corners in reverse
 /// order) is not exposed: the twin's front covers its back;
 /// the back is exposed when at least [`EXPOSED_SHARE`] of those that meet a surface first meet
-/// a face that sends light, or when an analytic light shines on it ([`analytic_reaches`]). Not
-/// when they meet backs (the inside of a closed object, or a twin), fronts that no light
-/// reaches (the inner faces of a closed object with some faces reversed), or all leave the
-/// scene (the outside of a room shell). A face sends light when it emits, or when it reflects
-/// (a front with albedo, either face of a two-sided patch) and its own rays meet a face that
-/// sends light or an analytic light shines on it: the same rays from both faces of every
-/// patch, propagated to a fixed point (at most [`LIT_PASSES_MAX`] passes). The test is per
-/// patch: a box standing open-bottomed on a large floor patch that is lit elsewhere is exposed
-/// inside, a false positive that costs two-sided bins, not light.
+/// the front of another (they see open space that light crosses), not when they meet backs
+/// (the inside of a closed object, or a twin) or all leave the scene (the outside of a room
+/// shell). A box standing open-bottomed on a floor is exposed inside (its inner faces see the
+/// floor's front): a false positive that costs two-sided bins, not light.
 pub fn exposed_backs(patches: &Patches) -> Vec<bool> {
     let twinned = back_to_back_twins(patches);
     let scene = RayScene::new(&patches.corners, &patches.active);
-    let n = patches.len();
+    let candidates: Vec<bool> = (0..patches.len())
+        .map(|p| patches.active[p] && !twinned[p])
+        .collect();
+    // Hits on fronts first; then, for two-sided patches still unexposed, hits on the back
+    // faces of two-sided patches found exposed (lit) count too.
+    let mut exposed = exposed_where(patches, &scene, &candidates, |hit, dir| {
+        patches.normal[hit].dot(dir) < 0.0
+    });
+    if patches.has_two_sided() {
+        let again: Vec<bool> = (0..patches.len())
+            .map(|p| candidates[p] && !exposed[p] && patches.is_two_sided(p))
+            .collect();
+        let first = exposed.clone();
+        let second = exposed_where(patches, &scene, &again, |hit, dir| {
+            patches.normal[hit].dot(dir) < 0.0 || (patches.is_two_sided(hit) && first[hit])
+        });
+        for (e, s) in exposed.iter_mut().zip(second) {
+            *e |= s;
+        }
+    }
+    exposed
+}
+
+/// [`exposed_backs`]'s ray test for the patches marked in `candidates` (false for the others),
+/// `lit(hit, dir)` telling whether a back ray in direction `dir` met a lit face of patch `hit`.
+fn exposed_where(
+    patches: &Patches,
+    scene: &RayScene,
+    candidates: &[bool],
+    lit: impl Fn(usize, DVec3) -> bool + Sync,
+) -> Vec<bool> {
     let active = patches.active_count().max(1);
     let rays = (BACK_RAY_BUDGET / active).clamp(BACK_RAYS_MIN, BACK_RAYS_MAX);
     let side = (rays as f64).sqrt().ceil() as usize;
-    let traced = |p: usize| patches.active[p] && !twinned[p];
-    // Face f is patch f / 2's front (f even) or back (f odd); `hits[f * rays + k]` is the face
-    // ray k from face f meets first (NO_FACE when it leaves the scene).
-    let mut hits = vec![NO_FACE; 2 * n * rays];
-    hits.par_chunks_mut(rays).enumerate().for_each(|(f, out)| {
-        let (p, back) = (f / 2, f % 2 == 1);
-        if !traced(p) {
-            return;
-        }
-        let (tri, n_p) = (&patches.corners[p], patches.normal[p]);
-        let n_side = if back { -n_p } else { n_p };
-        let mut rng = Rng::new(if back { 0x6261_636b } else { 0x6672_6f6e }, p as u64);
-        for (k, hit) in out.iter_mut().enumerate() {
-            // Stratified over the triangle (a side x side grid of its unit square), from
-            // 2 SCENE_EPS on the other side of it (so a coincident twin is met).
-            let (i, j) = ((k % side) as f64, (k / side % side) as f64);
-            let u1 = (i + rng.next_f64()) / side as f64;
-            let u2 = (j + rng.next_f64()) / side as f64;
-            let org = point_on_triangle(tri, u1, u2) - n_side * (2.0 * crate::geometry::SCENE_EPS);
-            let dir = cosine_direction(n_side, rng.next_f64(), rng.next_f64());
-            if let Some(h) = scene.closest(org, dir, p) {
-                let met_back = patches.normal[h.patch].dot(dir) >= 0.0;
-                *hit = (2 * h.patch + usize::from(met_back)) as u32;
-            }
-        }
-    });
-    // Faces that send light: emitting faces, and faces that reflect (a front with albedo, or
-    // either face of a two-sided patch) and receive light from a face that sends it (or from
-    // an analytic light); to a fixed point.
-    let reflects = |f: usize| {
-        let p = f / 2;
-        patches.active[p]
-            && patches.albedo[p].iter().any(|&a| a > 0.0)
-            && (f % 2 == 0 || patches.is_two_sided(p))
-    };
-    let lit_by_light = |f: usize| analytic_reaches(patches, f / 2, f % 2 == 1);
-    let mut sends: Vec<bool> = (0..2 * n)
-        .into_par_iter()
-        .map(|f| {
-            let p = f / 2;
-            let emits = patches.active[p]
-                && patches.emission[p].iter().any(|&e| e > 0.0)
-                && (f % 2 == 0 || patches.is_two_sided(p));
-            emits || (reflects(f) && lit_by_light(f))
-        })
-        .collect();
-    for _ in 0..LIT_PASSES_MAX {
-        let next: Vec<bool> = (0..2 * n)
-            .into_par_iter()
-            .map(|f| {
-                sends[f]
-                    || (reflects(f)
-                        && hits[f * rays..(f + 1) * rays]
-                            .iter()
-                            .any(|&h| h != NO_FACE && sends[h as usize]))
-            })
-            .collect();
-        let changed = next != sends;
-        sends = next;
-        if !changed {
-            break;
-        }
-    }
-    (0..n)
+    (0..patches.len())
         .into_par_iter()
         .map(|p| {
-            if !traced(p) {
+            if !candidates[p] {
                 return false;
             }
-            let back = &hits[(2 * p + 1) * rays..(2 * p + 2) * rays];
-            let met = back.iter().filter(|&&h| h != NO_FACE).count();
-            let lit = back
-                .iter()
-                .filter(|&&h| h != NO_FACE && sends[h as usize])
-                .count();
-            (lit > 0 && lit as f64 >= EXPOSED_SHARE * met as f64) || lit_by_light(2 * p + 1)
+            let (tri, n) = (&patches.corners[p], patches.normal[p]);
+            let mut rng = Rng::new(0x6261_636b, p as u64);
+            let (mut fronts, mut hits) = (0usize, 0usize);
+            for k in 0..rays {
+                // Stratified over the triangle (a side x side grid of its unit square).
+                let (i, j) = ((k % side) as f64, (k / side % side) as f64);
+                let u1 = (i + rng.next_f64()) / side as f64;
+                let u2 = (j + rng.next_f64()) / side as f64;
+                let org = point_on_triangle(tri, u1, u2) + n * (2.0 * crate::geometry::SCENE_EPS);
+                let dir = cosine_direction(-n, rng.next_f64(), rng.next_f64());
+                if let Some(hit) = scene.closest(org, dir, p) {
+                    hits += 1;
+                    if lit(hit.patch, dir) {
+                        fronts += 1;
+                    }
+                }
+            }
+            fronts > 0 && fronts as f64 >= EXPOSED_SHARE * hits as f64
         })
         .collect()
-}
-
-/// No face: a ray of [`exposed_backs`] that leaves the scene.
-const NO_FACE: u32 = u32::MAX;
-
-/// Most passes of [`exposed_backs`]'s propagation of light from face to face (each pass carries
-/// it one bounce further); light that needs more bounces to reach a face is not followed.
-pub const LIT_PASSES_MAX: usize = 64;
-
-/// True when an analytic light of `patches` can shine on patch `p`'s back (`back`) or front: a
-/// point or spot light on that side of its plane, a sun whose light travels into that side,
-/// or a sky.
-pub fn analytic_reaches(patches: &Patches, p: usize, back: bool) -> bool {
-    use crate::scene::lights::Light;
-    let n = if back {
-        -patches.normal[p]
-    } else {
-        patches.normal[p]
-    };
-    let x = patches.corners[p][0];
-    patches.lights.iter().any(|light| match *light {
-        Light::Point { position, .. } | Light::Spot { position, .. } => n.dot(position - x) > 0.0,
-        Light::Sun { direction, .. } => n.dot(direction) < 0.0,
-        Light::Sky { .. } => true,
-    })
 }
 
 /// Per patch: another active patch has its corners in the reverse order (on a grid of
@@ -210,7 +158,8 @@ pub struct Backs {
     /// `options.two_sided`, none otherwise; and every patch with a back face.
     pub blocking: Vec<bool>,
     /// Per patch: a two-sided patch ([`Patches::two_sided`]) whose back face is solved: its
-    /// back is exposed to light ([`exposed_backs`]) or it emits. The back face of a two-sided patch that no light can
+    /// back is exposed to light ([`exposed_backs`], or an analytic light shines on it, see
+    /// [`lit_from_behind`]) or it emits. The back face of a two-sided patch that no light can
     /// reach (a wall's outside, the inside of a closed object) stays dark, and costs nothing.
     /// Every two-sided patch when `options.block_exposed_backs` is off or antiradiance is.
     pub faces: Vec<bool>,
@@ -229,7 +178,10 @@ impl Backs {
         let faces: Vec<bool> = (0..n)
             .map(|p| {
                 patches.is_two_sided(p)
-                    && (!test || exposed[p] || patches.emission[p].iter().any(|&e| e > 0.0))
+                    && (!test
+                        || exposed[p]
+                        || patches.emission[p].iter().any(|&e| e > 0.0)
+                        || lit_from_behind(patches, p))
             })
             .collect();
         let blocking = (0..n)
@@ -240,6 +192,18 @@ impl Backs {
             .collect();
         Backs { blocking, faces }
     }
+}
+
+/// True when an analytic light of `patches` can shine on patch `p`'s back: a point or spot
+/// light behind its plane, a sun whose light travels into its back, or a sky.
+pub fn lit_from_behind(patches: &Patches, p: usize) -> bool {
+    use crate::scene::lights::Light;
+    let (n, x) = (patches.normal[p], patches.corners[p][0]);
+    patches.lights.iter().any(|light| match *light {
+        Light::Point { position, .. } | Light::Spot { position, .. } => n.dot(position - x) < 0.0,
+        Light::Sun { direction, .. } => n.dot(direction) > 0.0,
+        Light::Sky { .. } => true,
+    })
 }
 
 pub use crate::geometry::tolerances::CONVEX_TOLERANCE;
