@@ -233,3 +233,91 @@ fn cli_two_sided_material_adds_back_columns_and_rejects_unknown_names() {
         "{err}"
     );
 }
+
+/// A closed two-sided emitting tube (16 sides, radius 16 mm, capped) 14 mm under a closed
+/// housing, over a floor: the light its faces send inward stays inside the tube, so the floor
+/// and the housing get what they get from a one-sided tube (its inner faces were once exact
+/// direct light's emitters and added 25% to a classroom's walls).
+#[test]
+fn closed_two_sided_tube_under_a_housing_sends_nothing_inward() {
+    use glam::DVec3;
+    let mut tris: Vec<[DVec3; 3]> = Vec::new();
+    let mut albedo = Vec::new();
+    let mut emission = Vec::new();
+    let mut push = |t: [DVec3; 3], a: f64, e: f64| {
+        tris.push(t);
+        albedo.push([a; 3]);
+        emission.push([e; 3]);
+    };
+    let v = DVec3::new;
+    // Floor, 4 x 4 at y = 0, facing up.
+    push([v(-2., 0., -2.), v(-2., 0., 2.), v(2., 0., 2.)], 0.5, 0.0);
+    push([v(-2., 0., -2.), v(2., 0., 2.), v(2., 0., -2.)], 0.5, 0.0);
+    let floor = 0..2;
+    // The tube along x at height 1, facing outward, capped.
+    let (n, r, y, half) = (16, 0.016, 1.0, 0.6);
+    let ring = |x: f64, k: usize| {
+        let a = std::f64::consts::TAU * k as f64 / n as f64;
+        v(x, y + r * a.cos(), r * a.sin())
+    };
+    for k in 0..n {
+        let (a0, a1, b0, b1) = (
+            ring(-half, k),
+            ring(-half, k + 1),
+            ring(half, k),
+            ring(half, k + 1),
+        );
+        push([a0, a1, b1], 0.5, 1.0);
+        push([a0, b1, b0], 0.5, 1.0);
+        push([v(-half, y, 0.), a1, a0], 0.5, 1.0);
+        push([v(half, y, 0.), b0, b1], 0.5, 1.0);
+    }
+    // The housing: a closed box over the tube, its underside 14 mm above the tube's top,
+    // faces outward.
+    let (x0, x1, y0, y1, z0, z1) = (-0.65, 0.65, y + r + 0.014, y + r + 0.1, -0.08, 0.08);
+    let quad = |push: &mut dyn FnMut([DVec3; 3], f64, f64), q: [DVec3; 4]| {
+        push([q[0], q[1], q[2]], 0.8, 0.0);
+        push([q[0], q[2], q[3]], 0.8, 0.0);
+    };
+    quad(
+        &mut push,
+        [v(x0, y0, z0), v(x1, y0, z0), v(x1, y0, z1), v(x0, y0, z1)],
+    );
+    quad(
+        &mut push,
+        [v(x0, y1, z0), v(x0, y1, z1), v(x1, y1, z1), v(x1, y1, z0)],
+    );
+    quad(
+        &mut push,
+        [v(x0, y0, z0), v(x0, y0, z1), v(x0, y1, z1), v(x0, y1, z0)],
+    );
+    quad(
+        &mut push,
+        [v(x1, y0, z0), v(x1, y1, z0), v(x1, y1, z1), v(x1, y0, z1)],
+    );
+    quad(
+        &mut push,
+        [v(x0, y0, z0), v(x0, y1, z0), v(x1, y1, z0), v(x1, y0, z0)],
+    );
+    quad(
+        &mut push,
+        [v(x0, y0, z1), v(x1, y0, z1), v(x1, y1, z1), v(x0, y1, z1)],
+    );
+    let one = Scene::from_triangles(&tris, &albedo, &emission);
+    let mut two = one.clone();
+    two.two_sided = emission.iter().map(|e| e[0] > 0.0).collect();
+    let (a, b) = (
+        solve(&one, SolverKind::Hierarchical),
+        solve(&two, SolverKind::Hierarchical),
+    );
+    let floor_a = mean(&one, &a.triangle_radiance, |t| floor.contains(&t));
+    let floor_b = mean(&two, &b.triangle_radiance, |t| floor.contains(&t));
+    let housing = |t: usize| t >= 2 + 4 * n;
+    let d = difference(&one, &b.triangle_radiance, &a.triangle_radiance, housing);
+    eprintln!("floor {floor_b} (one-sided tube {floor_a}), housing difference {d}");
+    assert!(
+        (floor_b / floor_a - 1.0).abs() < 0.01,
+        "floor {floor_b} vs {floor_a}"
+    );
+    assert!(d < 0.01, "housing {d}");
+}

@@ -159,8 +159,10 @@ pub struct Backs {
     pub blocking: Vec<bool>,
     /// Per patch: a two-sided patch ([`Patches::two_sided`]) whose back face is solved: its
     /// back is exposed to light ([`exposed_backs`], or an analytic light shines on it, see
-    /// [`lit_from_behind`]) or it emits. The back face of a two-sided patch that no light can
-    /// reach (a wall's outside, the inside of a closed object) stays dark, and costs nothing.
+    /// [`lit_from_behind`]). The back face of a two-sided patch that no light can reach (a
+    /// wall's outside, the inside of a closed object) costs nothing: it reflects nothing, and
+    /// an emitting one's light reaches only what its shadow rays find (exact direct light;
+    /// the inside of a closed emitting tube, which traps it).
     /// Every two-sided patch when `options.block_exposed_backs` is off or antiradiance is.
     pub faces: Vec<bool>,
 }
@@ -177,11 +179,7 @@ impl Backs {
         };
         let faces: Vec<bool> = (0..n)
             .map(|p| {
-                patches.is_two_sided(p)
-                    && (!test
-                        || exposed[p]
-                        || patches.emission[p].iter().any(|&e| e > 0.0)
-                        || lit_from_behind(patches, p))
+                patches.is_two_sided(p) && (!test || exposed[p] || lit_from_behind(patches, p))
             })
             .collect();
         let blocking = (0..n)

@@ -30,8 +30,9 @@ impl Emitters {
             .sum()
     }
 
-    /// The active patches that emit in some channel.
-    pub(super) fn new(patches: &Patches) -> Emitters {
+    /// The active patches that emit in some channel; a two-sided one whose `back_face(p)`
+    /// emits from its back face too (a second emitter, its corners reversed).
+    pub(super) fn new(patches: &Patches, back_face: &dyn Fn(usize) -> bool) -> Emitters {
         let mut emitters = Emitters {
             patch: Vec::new(),
             geom: Vec::new(),
@@ -42,7 +43,7 @@ impl Emitters {
             if Emitters::emits(patches, p) {
                 let front = PatchGeom::new(patches.corners[p], patches.normal[p]);
                 // A two-sided emitter emits from its back face too: a second emitter.
-                let faces = if patches.is_two_sided(p) {
+                let faces = if patches.is_two_sided(p) && back_face(p) {
                     vec![front, front.flipped()]
                 } else {
                     vec![front]

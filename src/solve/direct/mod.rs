@@ -190,7 +190,19 @@ impl<'a> DirectLight<'a> {
     /// [`crate::mesh::build_patches`] makes them) for `receivers` receiving elements (which sets
     /// the shadow samples per element, see [`shadow_samples`]).
     pub fn new(patches: &'a Patches, receivers: usize) -> DirectLight<'a> {
-        let emitters = Emitters::new(patches);
+        DirectLight::with_back_faces(patches, receivers, None)
+    }
+
+    /// [`DirectLight::new`] where a two-sided emitter emits from its back face only when
+    /// `back_faces[p]` (the solver solves that face: light can reach its back; the back of a
+    /// closed emitting tube traps its light). `None`: every two-sided emitter's back emits.
+    pub fn with_back_faces(
+        patches: &'a Patches,
+        receivers: usize,
+        back_faces: Option<&[bool]>,
+    ) -> DirectLight<'a> {
+        let back = |p: usize| back_faces.is_none_or(|b| b.get(p).copied().unwrap_or(false));
+        let emitters = Emitters::new(patches, &back);
         DirectLight {
             patches,
             groups: group_emitters(&emitters),

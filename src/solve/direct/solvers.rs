@@ -74,11 +74,12 @@ pub const DIRECT_LIGHT_OFF: &str = "exact direct light off";
 /// ([`budget::direct_light_bytes`]: the shadow-ray scene and emitter groups are estimated
 /// before they are built, each receiver's lights once the groups are known), with its estimate;
 /// `None` when it does not fit.
-pub(super) fn direct_within(
-    patches: &Patches,
+pub(super) fn direct_within<'a>(
+    patches: &'a Patches,
     receivers: usize,
     spare: u64,
-) -> Option<(DirectLight<'_>, u64)> {
+    back_faces: Option<&[bool]>,
+) -> Option<(DirectLight<'a>, u64)> {
     let (p, e, r) = (
         patches.len() as u64,
         Emitters::count(patches) as u64,
@@ -87,7 +88,7 @@ pub(super) fn direct_within(
     if budget::direct_light_bytes(p, e, 0, Some(0)) > spare {
         return None;
     }
-    let direct = DirectLight::new(patches, receivers);
+    let direct = DirectLight::with_back_faces(patches, receivers, back_faces);
     let bytes = budget::direct_light_bytes(p, e, r, Some(direct.group_count() as u64));
     (bytes <= spare).then_some((direct, bytes))
 }
@@ -117,8 +118,13 @@ pub fn solve_hierarchical_direct(
         solution.stats.direct_light_skipped = true;
         solution
     };
-    let Some((direct, bytes)) = direct_within(patches, receivers.len(), prepared.spare_bytes())
-    else {
+    let back_faces = prepared.patches_with_back_faces(patches.len());
+    let Some((direct, bytes)) = direct_within(
+        patches,
+        receivers.len(),
+        prepared.spare_bytes(),
+        Some(&back_faces),
+    ) else {
         return Ok(skip(prepared, Some(DIRECT_LIGHT_OFF)));
     };
     if direct.over_budget(receivers.len()) {
@@ -182,7 +188,8 @@ pub fn solve_dense_direct(
         }
         Ok(solution)
     };
-    let Some((direct, _)) = direct_within(patches, receivers.len(), budget.spare(dense_bytes))
+    let Some((direct, _)) =
+        direct_within(patches, receivers.len(), budget.spare(dense_bytes), None)
     else {
         return skip(Some(DIRECT_LIGHT_OFF));
     };

@@ -548,6 +548,16 @@ impl Prepared {
         self.elements().chain(backs)
     }
 
+    /// Per patch (of `patches` patches): some element of it has a back face
+    /// ([`Prepared::faces`]).
+    pub fn patches_with_back_faces(&self, patches: usize) -> Vec<bool> {
+        let mut with = vec![false; patches];
+        for &e in &self.back_faces {
+            with[self.elem_patch[e as usize] as usize] = true;
+        }
+        with
+    }
+
     /// Number of [`Prepared::faces`]: the elements and the two-sided elements' back faces.
     pub fn face_count(&self) -> usize {
         self.element_count() + self.back_faces.len()
