@@ -5,15 +5,19 @@ use antiradiance::error::{Error, Result};
 use antiradiance::memory;
 use antiradiance::output::render::{self, CameraOptions, Shading};
 use antiradiance::progress::Progress;
+use antiradiance::scene::lights::Light;
+use antiradiance::scene::Scene;
+use antiradiance::solve::hierarchical::Prepared;
 use antiradiance::solve::relight::{
     animated_light, check_light_changes, emitter_centroids, frame_path, light_phase, sweep_weights,
-    LightChange, Relighter,
+    LightChange, Relighter, Relit,
 };
 use antiradiance::solve::solution::{error_against, sanitize};
+use antiradiance::solve::SolverOptions;
 use clap::Args;
 use glam::DVec3;
 use serde::Serialize;
-use serde_json::json;
+use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
@@ -318,6 +322,114 @@ fn check_out_dir(dir: &Path) -> Result<()> {
 pub fn relight(args: &RelightArgs) -> Result<()> {
     let start = Instant::now();
     let mut timings = Timings::default();
+    let Checked {
+        options,
+        frame_budget,
+        changes,
+        camera,
+    } = check_args(args)?;
+
+    let loaded = driver::load(&args.scene, &mut timings)?;
+    let (emitters, centroids) = emitter_centroids(&loaded.scene);
+    check_scene(args, &loaded, &emitters, &changes)?;
+    let mut relighter = driver::timed(&mut timings.build, || {
+        Relighter::from_patches(&loaded.scene, loaded.patches.clone(), &options)
+    })?;
+    let build_seconds = relighter.build_seconds();
+    let memory_warning =
+        antiradiance::solve::warnings::memory_warning(Some(relighter.prepared().memory()));
+    if let Some(w) = &memory_warning {
+        crate::cli::driver::print_warning(&w);
+    }
+
+    // The camera is resolved once, so every frame has the same view.
+    let (eye, target) = render::resolve_view(relighter.patches(), &camera);
+    let mut view = FrameView {
+        camera: CameraOptions {
+            eye: Some(eye),
+            target: Some(target),
+            ..camera
+        },
+        shading: if args.camera.smooth {
+            Shading::Smooth
+        } else {
+            Shading::Flat
+        },
+    };
+    if !args.out.exists() {
+        std::fs::create_dir(&args.out).map_err(|e| Error::io(&args.out, e))?;
+    }
+
+    let animation = Animation::new(args, &loaded.scene, emitters, centroids, changes);
+    let base_power = animation.power(&animation.base);
+    // With --bands: one precomputed light per band of emitters, mixed per frame.
+    let lights_start = Instant::now();
+    let bands = if args.bands > 0 {
+        Some(relighter.add_band_lights(&animation.emitters, &animation.centroids, args.bands)?)
+    } else {
+        None
+    };
+    let lights_seconds = lights_start.elapsed().as_secs_f64();
+    let initial_seconds = initial_solve(&animation, &mut relighter, frame_budget)?;
+    let records = run_frames(
+        &animation,
+        &mut relighter,
+        bands.as_deref(),
+        &mut view,
+        base_power,
+        &mut timings,
+    )?;
+    timings.total = start.elapsed().as_secs_f64();
+    let peak = memory::peak_rss_bytes();
+    let summary = FrameSummary::of(&records);
+
+    if let Some(path) = &args.report {
+        let mut report = Report::new("relight", &args.scene.scene, &loaded);
+        report
+            .add_warnings(memory_warning)
+            .insert(
+                "parameters",
+                parameters_json(args, &options, &view.camera, eye, target),
+            )
+            .insert("build_seconds", build_seconds)
+            .insert("initial_seconds", initial_seconds)
+            .insert("bands", bands.as_ref().map_or(0, Vec::len))
+            .insert("lights_seconds", lights_seconds)
+            .insert("hierarchy", hierarchy_json(relighter.prepared()))
+            .insert("summary", summary)
+            .insert("frames", &records)
+            .finish(&timings, peak);
+        report.write(path)?;
+    }
+    println!(
+        "{}",
+        relight_summary(
+            &loaded,
+            args,
+            build_seconds,
+            bands.as_ref().map(|c| (c.len(), lights_seconds)),
+            initial_seconds,
+            &summary
+        )
+    );
+    Ok(())
+}
+
+/// The arguments of `relight` after [`check_args`].
+struct Checked {
+    /// The solver options.
+    options: SolverOptions,
+    /// `--frame-budget` as a duration.
+    frame_budget: Option<Duration>,
+    /// `--move-light` then `--scale-light`.
+    changes: Vec<LightChange>,
+    /// The camera (eye and target possibly still automatic).
+    camera: CameraOptions,
+}
+
+/// Checks every argument of `relight` that can be checked before the scene is loaded, and the
+/// output paths.
+fn check_args(args: &RelightArgs) -> Result<Checked> {
     args.scene.validate()?;
     let options = args.solver_args.options()?;
     if !(1..=MAX_FRAMES).contains(&args.frames) {
@@ -375,10 +487,23 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
         .map(|p| ("--report", p.as_path()))
         .collect();
     driver::check_outputs(&report_files, &args.scene.scene)?;
+    Ok(Checked {
+        options,
+        frame_budget,
+        changes,
+        camera,
+    })
+}
 
-    let loaded = driver::load(&args.scene, &mut timings)?;
-    let (emitters, centroids) = emitter_centroids(&loaded.scene);
-    check_light_changes(&loaded.scene.lights, &changes).map_err(|e| {
+/// Checks the loaded scene against the arguments: the light changes name its lights, there is
+/// something to animate, and `--bands` has emitters and no lit analytic light.
+fn check_scene(
+    args: &RelightArgs,
+    loaded: &driver::Loaded,
+    emitters: &[usize],
+    changes: &[LightChange],
+) -> Result<()> {
+    check_light_changes(&loaded.scene.lights, changes).map_err(|e| {
         let flag = if args.move_light.is_empty() {
             "--scale-light"
         } else if args.scale_light.is_empty() {
@@ -410,72 +535,117 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
             "--bands mixes precomputed emission lights, and the scene has lit analytic lights (point, spot, sun, sky); relight without --bands".into(),
         ));
     }
-    let mut relighter = driver::timed(&mut timings.build, || {
-        Relighter::from_patches(&loaded.scene, loaded.patches.clone(), &options)
-    })?;
-    let build_seconds = relighter.build_seconds();
-    let memory_warning =
-        antiradiance::solve::warnings::memory_warning(Some(relighter.prepared().memory()));
-    if let Some(w) = &memory_warning {
-        crate::cli::driver::print_warning(&w);
+    Ok(())
+}
+
+/// What changes over the frames of `relight`: the emitters' sweep and the analytic lights'
+/// changes, from the scene's own lighting.
+struct Animation<'a> {
+    /// The arguments (`--dim`, `--frames`, `--hold`, ...).
+    args: &'a RelightArgs,
+    /// The scene.
+    scene: &'a Scene,
+    /// The emitting triangles ([`emitter_centroids`]).
+    emitters: Vec<usize>,
+    /// Their centroids.
+    centroids: Vec<DVec3>,
+    /// The light changes ([`check_light_changes`]).
+    changes: Vec<LightChange>,
+    /// The scene's emission per input triangle.
+    base: Vec<[f64; 3]>,
+    /// The scene's analytic lights.
+    base_lights: Vec<Light>,
+    /// Frames that move the lights (all but the `--hold` ones).
+    animated: usize,
+}
+
+impl<'a> Animation<'a> {
+    /// The animation of `scene` as `args` ask, from its own emission and lights.
+    fn new(
+        args: &'a RelightArgs,
+        scene: &'a Scene,
+        emitters: Vec<usize>,
+        centroids: Vec<DVec3>,
+        changes: Vec<LightChange>,
+    ) -> Animation<'a> {
+        Animation {
+            args,
+            scene,
+            emitters,
+            centroids,
+            changes,
+            base: scene.emission.clone(),
+            base_lights: scene.lights.clone(),
+            animated: args.frames - args.hold,
+        }
     }
 
-    // The camera is resolved once, so every frame has the same view.
-    let (eye, target) = render::resolve_view(relighter.patches(), &camera);
-    let mut camera = CameraOptions {
-        eye: Some(eye),
-        target: Some(target),
-        ..camera
-    };
-    let shading = if args.camera.smooth {
-        Shading::Smooth
-    } else {
-        Shading::Flat
-    };
-    if !args.out.exists() {
-        std::fs::create_dir(&args.out).map_err(|e| Error::io(&args.out, e))?;
-    }
-
-    let base = loaded.scene.emission.clone();
-    let power = |emission: &[[f64; 3]]| -> f64 {
-        emitters
+    /// The emitted power of `emission` (sum of a_t E_t over the emitters, mean over RGB).
+    fn power(&self, emission: &[[f64; 3]]) -> f64 {
+        self.emitters
             .iter()
-            .map(|&t| loaded.scene.area(t) * emission[t].iter().sum::<f64>() / 3.0)
+            .map(|&t| self.scene.area(t) * emission[t].iter().sum::<f64>() / 3.0)
             .sum()
-    };
-    let base_power = power(&base);
-    // With --bands: one precomputed light per band of emitters, mixed per frame.
-    let lights_start = Instant::now();
-    let bands = if args.bands > 0 {
-        Some(relighter.add_band_lights(&emitters, &centroids, args.bands)?)
-    } else {
-        None
-    };
-    let lights_seconds = lights_start.elapsed().as_secs_f64();
-    let base_lights = loaded.scene.lights.clone();
-    let animated = args.frames - args.hold;
-    // The lighting of animation step `step`: the emitters' sweep and the lights' changes.
-    let lighting = |relighter: &mut Relighter, step: usize| -> Result<Vec<[f64; 3]>> {
-        let mut emission = base.clone();
-        if !emitters.is_empty() {
-            let weights = sweep_weights(&centroids, step, animated, args.dim);
-            for (&t, w) in emitters.iter().zip(&weights) {
-                emission[t] = base[t].map(|x| x * w);
+    }
+
+    /// Sets the lighting of animation step `step` on `relighter`: the emitters' sweep and the
+    /// lights' changes; returns the emission.
+    fn lighting(&self, relighter: &mut Relighter, step: usize) -> Result<Vec<[f64; 3]>> {
+        let mut emission = self.base.clone();
+        if !self.emitters.is_empty() {
+            let weights = sweep_weights(&self.centroids, step, self.animated, self.args.dim);
+            for (&t, w) in self.emitters.iter().zip(&weights) {
+                emission[t] = self.base[t].map(|x| x * w);
             }
         }
-        let t = light_phase(step, animated);
-        for change in &changes {
+        let t = light_phase(step, self.animated);
+        for change in &self.changes {
             let k = change.light();
-            relighter.set_analytic_light(k, animated_light(&base_lights[k], k, &changes, t))?;
+            relighter
+                .set_analytic_light(k, animated_light(&self.base_lights[k], k, &self.changes, t))?;
         }
         relighter.set_emission(&emission)?;
         Ok(emission)
-    };
-    // Progressive: the first frame's lighting converged once, then each frame within its
-    // budget.
-    let initial_seconds = match frame_budget {
+    }
+
+    /// The relight of animation step `step`: warm-started sweeps, or with `bands` (the band
+    /// lights' centres) the mix of the band lights; returns it with its emission.
+    fn relight_step(
+        &self,
+        relighter: &mut Relighter,
+        bands: Option<&[DVec3]>,
+        step: usize,
+    ) -> Result<(Relit, Vec<[f64; 3]>)> {
+        Ok(match bands {
+            None => {
+                let emission = self.lighting(relighter, step)?;
+                (relighter.solve(&Progress::hidden()), emission)
+            }
+            Some(centres) => {
+                // The spot's brightness at each band's centre, over the same span as the
+                // emitters (the centres are inside it).
+                let mut points = centres.to_vec();
+                points.extend(&self.centroids);
+                let weights = sweep_weights(&points, step, self.animated, self.args.dim);
+                let intensities: Vec<[f64; 3]> =
+                    weights[..centres.len()].iter().map(|&w| [w; 3]).collect();
+                let relit = relighter.mix(&intensities)?;
+                (relit, relighter.emission().to_vec())
+            }
+        })
+    }
+}
+
+/// Progressive relighting (`frame_budget` set): the first frame's lighting converged once,
+/// before the frames, which then run within the budget; returns the seconds of that solve.
+fn initial_solve(
+    animation: &Animation,
+    relighter: &mut Relighter,
+    frame_budget: Option<Duration>,
+) -> Result<Option<f64>> {
+    Ok(match frame_budget {
         Some(_) => {
-            lighting(&mut relighter, 0)?;
+            animation.lighting(relighter, 0)?;
             let initial = relighter.solve(&Progress::hidden());
             initial
                 .solution
@@ -486,29 +656,35 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
             Some(initial.seconds)
         }
         None => None,
-    };
+    })
+}
+
+/// How the frames are drawn: the fixed camera (its exposure set by the first frame when not
+/// given) and the shading.
+struct FrameView {
+    /// The camera, eye and target resolved.
+    camera: CameraOptions,
+    /// Flat or smooth.
+    shading: Shading,
+}
+
+/// Relights and writes every frame; returns their records. `base_power`: the emitted power of
+/// the scene's own emission ([`Animation::power`]).
+fn run_frames(
+    animation: &Animation,
+    relighter: &mut Relighter,
+    bands: Option<&[DVec3]>,
+    view: &mut FrameView,
+    base_power: f64,
+    timings: &mut Timings,
+) -> Result<Vec<FrameRecord>> {
+    let args = animation.args;
     let progress = Progress::new("relight", args.frames as u64, !args.quiet);
     let mut records = Vec::with_capacity(args.frames);
     for frame in 0..args.frames {
         // The last `hold` frames keep the animation's last lighting.
-        let step = frame.min(animated - 1);
-        let (relit, emission) = match &bands {
-            None => {
-                let emission = lighting(&mut relighter, step)?;
-                (relighter.solve(&Progress::hidden()), emission)
-            }
-            Some(centres) => {
-                // The spot's brightness at each band's centre, over the same span as the
-                // emitters (the centres are inside it).
-                let mut points = centres.clone();
-                points.extend(&centroids);
-                let weights = sweep_weights(&points, step, animated, args.dim);
-                let intensities: Vec<[f64; 3]> =
-                    weights[..centres.len()].iter().map(|&w| [w; 3]).collect();
-                let relit = relighter.mix(&intensities)?;
-                (relit, relighter.emission().to_vec())
-            }
-        };
+        let step = frame.min(animation.animated - 1);
+        let (relit, emission) = animation.relight_step(relighter, bands, step)?;
         timings.solve += relit.seconds;
         // A failed relight is an error: its frame and the later ones are not written.
         relit
@@ -517,32 +693,16 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
             .check("hierarchical")
             .map_err(|e| Error::Solve(format!("frame {frame}: {e}")))?;
         let error_vs_converged = if args.errors {
-            let reference = relighter.converged(&Progress::hidden());
-            reference
-                .solution
-                .stats
-                .check("hierarchical")
-                .map_err(|e| Error::Solve(format!("frame {frame}, the converged solve: {e}")))?;
-            Some(sanitize(error_against(
-                &loaded.scene,
-                &relit.solution,
-                &reference.solution,
-            )))
+            Some(error_vs_converged(
+                animation.scene,
+                relighter,
+                &relit,
+                frame,
+            )?)
         } else {
             None
         };
-        if camera.exposure.is_none() {
-            camera.exposure = Some(render::auto_exposure(relighter.patches(), &relit.solution));
-        }
-        let render_start = Instant::now();
-        render::render_png_shaded(
-            &frame_path(&args.out, frame),
-            relighter.patches(),
-            &relit.solution,
-            &camera,
-            shading,
-        )?;
-        let render_seconds = render_start.elapsed().as_secs_f64();
+        let render_seconds = render_frame(args, relighter, &relit, view, frame)?;
         timings.output += render_seconds;
         let stats = &relit.solution.stats;
         records.push(FrameRecord {
@@ -555,7 +715,7 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
             converged: stats.converged,
             warm_started: relit.warm_started,
             relative_power: if base_power > 0.0 {
-                sanitize(power(&emission) / base_power)
+                sanitize(animation.power(&emission) / base_power)
             } else {
                 0.0
             },
@@ -565,66 +725,91 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
         progress.message(format!("{:.0} ms per relight", 1e3 * relit.seconds));
     }
     progress.finish();
-    timings.total = start.elapsed().as_secs_f64();
-    let peak = memory::peak_rss_bytes();
-    let summary = FrameSummary::of(&records);
+    Ok(records)
+}
 
-    if let Some(path) = &args.report {
-        let mut report = Report::new("relight", &args.scene.scene, &loaded);
-        report
-            .add_warnings(memory_warning)
-            .insert(
-                "parameters",
-                json!({
-                    "solver": "hierarchical",
-                    "preset": args.solver_args.preset_name(),
-                    "solver_options": options,
-                    "scene_options": args.scene.to_json(),
-                    "frames": args.frames,
-                    "dim": args.dim,
-                    "hold": args.hold,
-                    "frame_budget_ms": args.frame_budget,
-                    "move_light": args.move_light.iter().map(change_text).collect::<Vec<_>>(),
-                    "scale_light": args.scale_light.iter().map(change_text).collect::<Vec<_>>(),
-                    "errors": args.errors,
-                    "exposure": camera.exposure,
-                    "eye": [eye.x, eye.y, eye.z],
-                    "target": [target.x, target.y, target.z],
-                    "width": camera.width,
-                    "height": camera.height,
-                    "out": args.out.display().to_string(),
-                }),
-            )
-            .insert("build_seconds", build_seconds)
-            .insert("initial_seconds", initial_seconds)
-            .insert("bands", bands.as_ref().map_or(0, Vec::len))
-            .insert("lights_seconds", lights_seconds)
-            .insert(
-                "hierarchy",
-                json!({
-                    "links": relighter.prepared().links.len(),
-                    "elements": relighter.prepared().element_count(),
-                    "solver_bytes": relighter.prepared().bytes(),
-                    "memory": relighter.prepared().memory(),
-                }),
-            )
-            .insert("summary", summary)
-            .insert("frames", &records)
-            .finish(&timings, peak);
-        report.write(path)?;
+/// `--errors`: the error of frame `frame`'s relight against its lighting solved from scratch
+/// ([`Relighter::converged`]).
+fn error_vs_converged(
+    scene: &Scene,
+    relighter: &mut Relighter,
+    relit: &Relit,
+    frame: usize,
+) -> Result<f64> {
+    let reference = relighter.converged(&Progress::hidden());
+    reference
+        .solution
+        .stats
+        .check("hierarchical")
+        .map_err(|e| Error::Solve(format!("frame {frame}, the converged solve: {e}")))?;
+    Ok(sanitize(error_against(
+        scene,
+        &relit.solution,
+        &reference.solution,
+    )))
+}
+
+/// Writes the picture of frame `frame` (the first frame fixes the exposure when none was
+/// given); returns the seconds it took.
+fn render_frame(
+    args: &RelightArgs,
+    relighter: &Relighter,
+    relit: &Relit,
+    view: &mut FrameView,
+    frame: usize,
+) -> Result<f64> {
+    let camera = &mut view.camera;
+    if camera.exposure.is_none() {
+        camera.exposure = Some(render::auto_exposure(relighter.patches(), &relit.solution));
     }
-    println!(
-        "{}",
-        relight_summary(
-            &loaded,
-            args,
-            build_seconds,
-            bands.as_ref().map(|c| (c.len(), lights_seconds)),
-            initial_seconds,
-            &summary
-        )
-    );
-    Ok(())
+    let render_start = Instant::now();
+    render::render_png_shaded(
+        &frame_path(&args.out, frame),
+        relighter.patches(),
+        &relit.solution,
+        camera,
+        view.shading,
+    )?;
+    Ok(render_start.elapsed().as_secs_f64())
+}
+
+/// The `parameters` of the `relight` report.
+fn parameters_json(
+    args: &RelightArgs,
+    options: &SolverOptions,
+    camera: &CameraOptions,
+    eye: DVec3,
+    target: DVec3,
+) -> Value {
+    json!({
+        "solver": "hierarchical",
+        "preset": args.solver_args.preset_name(),
+        "solver_options": options,
+        "scene_options": args.scene.to_json(),
+        "frames": args.frames,
+        "dim": args.dim,
+        "hold": args.hold,
+        "frame_budget_ms": args.frame_budget,
+        "move_light": args.move_light.iter().map(change_text).collect::<Vec<_>>(),
+        "scale_light": args.scale_light.iter().map(change_text).collect::<Vec<_>>(),
+        "errors": args.errors,
+        "exposure": camera.exposure,
+        "eye": [eye.x, eye.y, eye.z],
+        "target": [target.x, target.y, target.z],
+        "width": camera.width,
+        "height": camera.height,
+        "out": args.out.display().to_string(),
+    })
+}
+
+/// The `hierarchy` of the `relight` report: links, elements and memory of the tree and links.
+fn hierarchy_json(prepared: &Prepared) -> Value {
+    json!({
+        "links": prepared.links.len(),
+        "elements": prepared.element_count(),
+        "solver_bytes": prepared.bytes(),
+        "memory": prepared.memory(),
+    })
 }
 
 /// The line `relight` prints on stdout when done.
