@@ -23,14 +23,12 @@
 use std::path::Path;
 use std::time::Duration;
 
-use antiradiance::scene::lights::Light;
 use glam::DVec3;
 
-use antiradiance::progress::Progress;
-use antiradiance::scene::generated;
-use antiradiance::scene::{load_obj, Scene, SceneOptions};
-use antiradiance::solve::relight::{emitter_centroids, sweep_weights, Relighter};
-use antiradiance::solve::SolverOptions;
+use antiradiance::details::{
+    emitter_centroids, generated, load_obj, sweep_weights, Light, Progress,
+};
+use antiradiance::{Relighter, Scene, SceneOptions, SolverOptions};
 use criterion::{criterion_group, criterion_main, Criterion};
 
 /// Frames of the sweep one relight steps through.

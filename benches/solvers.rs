@@ -9,18 +9,11 @@
 use std::path::Path;
 use std::time::Duration;
 
-use antiradiance::geometry::bins::Bins;
-use antiradiance::hierarchy::links;
-use antiradiance::hierarchy::ClusterTree;
-use antiradiance::mesh::{build_patches, Patches};
-use antiradiance::progress::Progress;
-use antiradiance::scene::generated;
-use antiradiance::scene::{load_obj, SceneOptions};
-use antiradiance::solve::budget::LinkBudget;
-use antiradiance::solve::dense::solve_dense;
-use antiradiance::solve::direct::solve_hierarchical_direct;
-use antiradiance::solve::hierarchical::{link_params, Prepared};
-use antiradiance::solve::SolverOptions;
+use antiradiance::details::{
+    build_patches, generated, link_params, links, load_obj, solve_dense, solve_hierarchical_direct,
+    Bins, ClusterTree, LinkBudget, Patches, Prepared, Progress,
+};
+use antiradiance::{SceneOptions, SolverOptions};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 
 fn bench_scenes() -> Vec<(String, Patches)> {

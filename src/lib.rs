@@ -21,19 +21,22 @@
 //! Four calls cover the common job: [`load()`] a scene, [`solve()`] it, [`write()`] the results,
 //! or build a [`relight()`]er that re-solves it for new emission.
 //!
+//! The supported surface is this front door (the four calls and the types they take and
+//! return, re-exported here: [`Scene`], [`SceneOptions`], [`SolverOptions`], [`Solved`],
+//! [`Relighter`], [`Error`], [`Result`], [`Warning`]) plus [`details`]: the internals the
+//! benches and the integration tests use beyond it (generated scenes, patches, the tree and
+//! links, each solver on its own, the path tracer, solution measures, the writers). The stage
+//! modules stay public for the tests; the rest of what they hold may change.
+//!
 //! ```
 //! # fn main() -> antiradiance::Result<()> {
-//! use antiradiance::scene::SceneOptions;
-//! use antiradiance::solve::SolverOptions;
+//! use antiradiance::details::generated;
+//! use antiradiance::{SceneOptions, SolverOptions};
 //!
 //! let dir = tempfile::tempdir().unwrap();
 //! let path = dir.path().join("cornell_box.obj");
 //! // A generated scene written to disk, as any OBJ+MTL file would be.
-//! antiradiance::scene::generated::write_obj(
-//!     &antiradiance::scene::generated::cornell_box(),
-//!     &path,
-//!     "Cornell box",
-//! )?;
+//! generated::write_obj(&generated::cornell_box(), &path, "Cornell box")?;
 //!
 //! let scene = antiradiance::load(&path, &SceneOptions::default())?;
 //! let solved = antiradiance::solve(&scene, None, &SolverOptions::fast())?;
@@ -68,14 +71,54 @@ pub mod solve;
 pub mod transport;
 
 pub use error::{Error, Result, Warning, WarningKind};
+pub use scene::{Scene, SceneOptions};
+pub use solve::relight::{Relighter, Relit};
+pub use solve::{Preset, SolverOptions};
 
 use std::path::Path;
 
 use mesh::Patches;
-use scene::{Scene, SceneOptions};
-use solve::relight::Relighter;
 use solve::solution::Solution;
-use solve::{SolverKind, SolverOptions};
+use solve::SolverKind;
+
+/// What the benches and the integration tests use beyond the front door, by stage: loaders,
+/// generated scenes and lights; patches and geometry; the cluster tree and links; each solver,
+/// its parts and the path tracer; solution measures; the output writers and the renderer.
+pub mod details {
+    pub use crate::scene::lights::{spot_falloff, Light, LUMENS_PER_WATT};
+    pub use crate::scene::{generated, interiors, load_obj, load_scene, variants};
+
+    pub use crate::geometry::bins::Bins;
+    pub use crate::geometry::raytrace::RayScene;
+    pub use crate::geometry::sampling::Rng;
+    pub use crate::geometry::Tri;
+    pub use crate::mesh::{build_patches, Patches};
+
+    pub use crate::hierarchy::{links, ClusterTree};
+
+    pub use crate::progress::Progress;
+    pub use crate::reference::{solve_reference, ReferenceOptions};
+    pub use crate::solve::budget::LinkBudget;
+    pub use crate::solve::dense::solve_dense;
+    pub use crate::solve::direct::{solve_dense_direct, solve_hierarchical_direct};
+    pub use crate::solve::health::{self, FailureKind};
+    pub use crate::solve::hierarchical::{link_params, solve_hierarchical, Prepared};
+    pub use crate::solve::model::{exposed_backs, ModelStats};
+    pub use crate::solve::relight::{
+        animated_light, check_light_changes, emitter_centroids, frame_path, light_phase,
+        sweep_weights, LightChange,
+    };
+    pub use crate::solve::warnings::cap_warning;
+    pub use crate::solve::{change_ratio, run, SolverKind};
+
+    pub use crate::solve::solution::{error_against, relative_error, Solution, SolveStats};
+
+    pub use crate::output::render;
+    pub use crate::output::{
+        read_triangles_csv, write_atomic, write_baked_glb, write_json, write_ply, write_scene_glb,
+        write_triangles_csv, TRIANGLES_CSV_HEADER,
+    };
+}
 
 /// Reads a scene file ([`scene::load_scene`]): glTF 2.0 when the name ends in `.gltf` or
 /// `.glb`, otherwise an OBJ file and the MTL files it names.

@@ -184,64 +184,12 @@ pub fn write_baked_glb(
             path.display()
         )));
     }
-    // Groups of active patches by material, in order of first appearance.
-    let material_of = |p: usize| {
-        scene
-            .material
-            .get(patches.parent[p] as usize)
-            .copied()
-            .flatten()
-    };
-    let mut groups: Vec<(Option<u32>, Vec<usize>)> = Vec::new();
-    for p in (0..patches.len()).filter(|&p| patches.active[p]) {
-        let m = material_of(p);
-        match groups.iter_mut().find(|(g, _)| *g == m) {
-            Some((_, list)) => list.push(p),
-            None => groups.push((m, vec![p])),
-        }
-    }
+    let groups = material_groups(scene, patches);
     let mut b = Builder::default();
     let mut primitives = Vec::new();
     let mut materials = Vec::new();
     for (m, list) in &groups {
-        let mut sub = Patches {
-            frame: patches.frame,
-            emission_scale: patches.emission_scale,
-            ..Patches::default()
-        };
-        let mut sub_solution = Solution::default();
-        for &p in list {
-            sub.push(
-                patches.corners[p],
-                patches.parent[p],
-                patches.albedo[p],
-                patches.emission[p],
-                true,
-            );
-            sub_solution.patch_radiance.push(solution.patch_radiance[p]);
-        }
-        let welded = render::weld(&sub, &sub_solution);
-        let positions: Vec<[f32; 3]> = welded
-            .positions
-            .iter()
-            .map(|&q| patches.frame.world_from_unit(q).to_array().map(f32_of))
-            .collect();
-        let colors: Vec<[f32; 3]> = welded
-            .radiance
-            .iter()
-            .map(|r| r.map(|x| f32_of((x * exposure).clamp(0.0, 1.0))))
-            .collect();
-        let indices: Vec<u32> = welded.faces.iter().flatten().copied().collect();
-        let radiance: Vec<[f32; 3]> = list
-            .iter()
-            .map(|&p| solution.patch_radiance[p].map(f32_of))
-            .collect();
-        let parents: Vec<f32> = list.iter().map(|&p| patches.parent[p] as f32).collect();
-        let pos = b.vec3(&positions, Some(ARRAY_BUFFER));
-        let col = b.vec3(&colors, Some(ARRAY_BUFFER));
-        let idx = b.indices(&indices);
-        let rad = b.vec3(&radiance, None);
-        let par = b.scalar_f32(&parents);
+        let baked = baked_primitive(&mut b, patches, solution, exposure, list);
         let name = m
             .and_then(|i| scene.material_names.get(i as usize).cloned())
             .unwrap_or_else(|| "(no material)".to_string());
@@ -255,11 +203,11 @@ pub fn write_baked_glb(
             "extensions": { "KHR_materials_unlit": {} },
         }));
         primitives.push(json!({
-            "attributes": { "POSITION": pos, "COLOR_0": col },
-            "indices": idx,
+            "attributes": { "POSITION": baked.pos, "COLOR_0": baked.col },
+            "indices": baked.idx,
             "material": materials.len() - 1,
             "mode": 4,
-            "extras": { "radiance": rad, "input_triangle": par },
+            "extras": { "radiance": baked.rad, "input_triangle": baked.par },
         }));
     }
     let json = json!({
@@ -285,6 +233,92 @@ pub fn write_baked_glb(
         return Err(too_large(path, bytes.len()));
     }
     write_atomic(path, |w| w.write_all(&bytes))
+}
+
+/// The active patches grouped by their input triangle's material, in order of first
+/// appearance.
+fn material_groups(scene: &Scene, patches: &Patches) -> Vec<(Option<u32>, Vec<usize>)> {
+    let material_of = |p: usize| {
+        scene
+            .material
+            .get(patches.parent[p] as usize)
+            .copied()
+            .flatten()
+    };
+    let mut groups: Vec<(Option<u32>, Vec<usize>)> = Vec::new();
+    for p in (0..patches.len()).filter(|&p| patches.active[p]) {
+        let m = material_of(p);
+        match groups.iter_mut().find(|(g, _)| *g == m) {
+            Some((_, list)) => list.push(p),
+            None => groups.push((m, vec![p])),
+        }
+    }
+    groups
+}
+
+/// The accessors of one baked primitive.
+struct BakedAccessors {
+    /// Welded vertex positions, world units.
+    pos: usize,
+    /// Vertex colours.
+    col: usize,
+    /// Triangle indices.
+    idx: usize,
+    /// Radiance per triangle.
+    rad: usize,
+    /// Input triangle per triangle.
+    par: usize,
+}
+
+/// Adds to `b` the accessors of the primitive of patches `list`: welded positions and colours
+/// (B times `exposure`, clipped to [0, 1]), indices, radiance and input triangle per triangle.
+fn baked_primitive(
+    b: &mut Builder,
+    patches: &Patches,
+    solution: &Solution,
+    exposure: f64,
+    list: &[usize],
+) -> BakedAccessors {
+    let mut sub = Patches {
+        frame: patches.frame,
+        emission_scale: patches.emission_scale,
+        ..Patches::default()
+    };
+    let mut sub_solution = Solution::default();
+    for &p in list {
+        sub.push(
+            patches.corners[p],
+            patches.parent[p],
+            patches.albedo[p],
+            patches.emission[p],
+            true,
+        );
+        sub_solution.patch_radiance.push(solution.patch_radiance[p]);
+    }
+    let welded = render::weld(&sub, &sub_solution);
+    let positions: Vec<[f32; 3]> = welded
+        .positions
+        .iter()
+        .map(|&q| patches.frame.world_from_unit(q).to_array().map(f32_of))
+        .collect();
+    let colors: Vec<[f32; 3]> = welded
+        .radiance
+        .iter()
+        .map(|r| r.map(|x| f32_of((x * exposure).clamp(0.0, 1.0))))
+        .collect();
+    let indices: Vec<u32> = welded.faces.iter().flatten().copied().collect();
+    let radiance: Vec<[f32; 3]> = list
+        .iter()
+        .map(|&p| solution.patch_radiance[p].map(f32_of))
+        .collect();
+    let parents: Vec<f32> = list.iter().map(|&p| patches.parent[p] as f32).collect();
+    BakedAccessors {
+        pos: b.vec3(&positions, Some(ARRAY_BUFFER)),
+        col: b.vec3(&colors, Some(ARRAY_BUFFER)),
+        idx: b.indices(&indices),
+        rad: b.vec3(&radiance, None),
+        par: b.scalar_f32(&parents),
+    }
 }
 
 /// Writes a scene as binary glTF input (see the module doc). Errors: an empty scene, arrays of

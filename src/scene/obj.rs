@@ -311,19 +311,6 @@ pub(crate) fn scan_obj(path: &Path, text: &str) -> Result<ObjScan> {
         vertices: String::new(),
         body: String::new(),
     };
-    let number = |w: &str, line_no: usize, what: &str| -> Result<f64> {
-        let x: f64 = w
-            .parse()
-            .map_err(|_| parse_err(path, line_no, format!("malformed number '{w}' in {what}")))?;
-        if !x.is_finite() {
-            return Err(parse_err(
-                path,
-                line_no,
-                format!("{what} value '{w}' is not finite"),
-            ));
-        }
-        Ok(x)
-    };
     for (i, raw) in text.lines().enumerate() {
         let line_no = i + 1;
         let line = content(raw);
@@ -331,89 +318,13 @@ pub(crate) fn scan_obj(path: &Path, text: &str) -> Result<ObjScan> {
         match words.next() {
             Some("v") => {
                 let nums: Vec<&str> = words.collect();
-                if nums.len() < 3 {
-                    return Err(parse_err(path, line_no, "vertex needs three coordinates"));
-                }
-                if !matches!(nums.len(), 3 | 4 | 6) {
-                    return Err(parse_err(
-                        path,
-                        line_no,
-                        format!(
-                            "vertex has {} numbers; expected x y z, x y z w or x y z r g b",
-                            nums.len()
-                        ),
-                    ));
-                }
-                let mut xyz = [0.0; 3];
-                for (k, w) in nums[..3].iter().enumerate() {
-                    xyz[k] = number(w, line_no, "vertex coordinate")?;
-                }
-                for w in nums.iter().skip(4) {
-                    number(w, line_no, "vertex colour")?;
-                }
-                if nums.len() == 4 {
-                    let w = number(nums[3], line_no, "vertex weight")?;
-                    if w == 0.0 {
-                        return Err(parse_err(path, line_no, "vertex weight w is 0"));
-                    }
-                    let p = xyz.map(|x| x / w);
-                    if !p.iter().all(|x| x.is_finite()) {
-                        return Err(parse_err(
-                            path,
-                            line_no,
-                            "vertex coordinate is not finite after dividing by w",
-                        ));
-                    }
-                    scan.vertices
-                        .push_str(&format!("v {:e} {:e} {:e}\n", p[0], p[1], p[2]));
-                } else {
-                    scan.vertices
-                        .push_str(&format!("v {} {} {}\n", nums[0], nums[1], nums[2]));
-                }
+                scan_vertex(path, line_no, &nums, &mut scan.vertices)?;
                 vertices_so_far += 1;
             }
             Some("f") => {
                 let refs: Vec<&str> = words.collect();
-                if refs.len() < 3 {
-                    return Err(parse_err(
-                        path,
-                        line_no,
-                        "face needs at least three vertices",
-                    ));
-                }
-                scan.body.push('f');
-                for r in &refs {
-                    let first = r.split('/').next().unwrap_or("");
-                    let idx: i64 = first.parse().map_err(|_| {
-                        parse_err(path, line_no, format!("malformed face index '{r}'"))
-                    })?;
-                    let resolved = if idx > 0 {
-                        idx
-                    } else {
-                        vertices_so_far as i64 + idx + 1
-                    };
-                    if idx == 0 || resolved < 1 || resolved > vertex_total as i64 {
-                        return Err(parse_err(
-                            path,
-                            line_no,
-                            format!(
-                                "face index {idx} out of range (the file has {vertex_total} vertices)"
-                            ),
-                        ));
-                    }
-                    // Texture and normal references are not used: checked for syntax only.
-                    for part in r.split('/').skip(1) {
-                        if !part.is_empty() && part.parse::<i64>().is_err() {
-                            return Err(parse_err(
-                                path,
-                                line_no,
-                                format!("malformed face index '{r}'"),
-                            ));
-                        }
-                    }
-                    scan.body.push_str(&format!(" {resolved}"));
-                }
-                scan.body.push('\n');
+                let counts = (vertices_so_far, vertex_total);
+                scan_face(path, line_no, &refs, counts, &mut scan.body)?;
                 scan.triangle_count += refs.len() - 2;
             }
             Some("mtllib") => {
@@ -440,6 +351,115 @@ pub(crate) fn scan_obj(path: &Path, text: &str) -> Result<ObjScan> {
         });
     }
     Ok(scan)
+}
+
+/// A finite number `w` of an OBJ line (`what` names it in the error).
+fn obj_number(path: &Path, w: &str, line_no: usize, what: &str) -> Result<f64> {
+    let x: f64 = w
+        .parse()
+        .map_err(|_| parse_err(path, line_no, format!("malformed number '{w}' in {what}")))?;
+    if !x.is_finite() {
+        return Err(parse_err(
+            path,
+            line_no,
+            format!("{what} value '{w}' is not finite"),
+        ));
+    }
+    Ok(x)
+}
+
+/// Checks the numbers `nums` of the `v` line `line_no` and appends it to `vertices` as
+/// `v x y z` (w applied, colours dropped).
+fn scan_vertex(path: &Path, line_no: usize, nums: &[&str], vertices: &mut String) -> Result<()> {
+    if nums.len() < 3 {
+        return Err(parse_err(path, line_no, "vertex needs three coordinates"));
+    }
+    if !matches!(nums.len(), 3 | 4 | 6) {
+        return Err(parse_err(
+            path,
+            line_no,
+            format!(
+                "vertex has {} numbers; expected x y z, x y z w or x y z r g b",
+                nums.len()
+            ),
+        ));
+    }
+    let mut xyz = [0.0; 3];
+    for (k, w) in nums[..3].iter().enumerate() {
+        xyz[k] = obj_number(path, w, line_no, "vertex coordinate")?;
+    }
+    for w in nums.iter().skip(4) {
+        obj_number(path, w, line_no, "vertex colour")?;
+    }
+    if nums.len() == 4 {
+        let w = obj_number(path, nums[3], line_no, "vertex weight")?;
+        if w == 0.0 {
+            return Err(parse_err(path, line_no, "vertex weight w is 0"));
+        }
+        let p = xyz.map(|x| x / w);
+        if !p.iter().all(|x| x.is_finite()) {
+            return Err(parse_err(
+                path,
+                line_no,
+                "vertex coordinate is not finite after dividing by w",
+            ));
+        }
+        vertices.push_str(&format!("v {:e} {:e} {:e}\n", p[0], p[1], p[2]));
+    } else {
+        vertices.push_str(&format!("v {} {} {}\n", nums[0], nums[1], nums[2]));
+    }
+    Ok(())
+}
+
+/// Checks the vertex references `refs` of the `f` line `line_no`, after `vertices_so_far` of
+/// the file's `vertex_total` `v` lines (relative indices count back from there), and appends
+/// the face to `body` with absolute position indices only.
+fn scan_face(
+    path: &Path,
+    line_no: usize,
+    refs: &[&str],
+    (vertices_so_far, vertex_total): (usize, usize),
+    body: &mut String,
+) -> Result<()> {
+    if refs.len() < 3 {
+        return Err(parse_err(
+            path,
+            line_no,
+            "face needs at least three vertices",
+        ));
+    }
+    body.push('f');
+    for r in refs {
+        let first = r.split('/').next().unwrap_or("");
+        let idx: i64 = first
+            .parse()
+            .map_err(|_| parse_err(path, line_no, format!("malformed face index '{r}'")))?;
+        let resolved = if idx > 0 {
+            idx
+        } else {
+            vertices_so_far as i64 + idx + 1
+        };
+        if idx == 0 || resolved < 1 || resolved > vertex_total as i64 {
+            return Err(parse_err(
+                path,
+                line_no,
+                format!("face index {idx} out of range (the file has {vertex_total} vertices)"),
+            ));
+        }
+        // Texture and normal references are not used: checked for syntax only.
+        for part in r.split('/').skip(1) {
+            if !part.is_empty() && part.parse::<i64>().is_err() {
+                return Err(parse_err(
+                    path,
+                    line_no,
+                    format!("malformed face index '{r}'"),
+                ));
+            }
+        }
+        body.push_str(&format!(" {resolved}"));
+    }
+    body.push('\n');
+    Ok(())
 }
 
 /// What the line-level scan of an MTL file learned.

@@ -317,16 +317,45 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
     let mut timings = Timings::default();
     let loaded = driver::load(&args.scene, &mut timings)?;
     let truth = reference_radiance(args, &loaded, reference_file)?;
+
+    // 3. Run the grid and mark the Pareto front.
+    let mut results = run_grid(args, &runs, &loaded, &truth)?;
+    mark_pareto_front(&mut results, args.time_axis);
+
+    // 4. Outputs: CSV, plot, table.
+    write_csv(&args.csv, args.solver, &results)?;
+    if let Some(path) = &args.svg {
+        write_svg(
+            path,
+            &plot_title(args),
+            args.solver,
+            args.time_axis,
+            &results,
+        )?;
+    }
+    let mut stdout = std::io::stdout().lock();
+    // A closed pipe (`| head`) is not an error worth a message.
+    let _ = stdout.write_all(table(args.solver, &results).as_bytes());
+    let _ = stdout.flush();
+    Ok(())
+}
+
+/// Runs the grid, one solve at a time (each solve uses every core), and measures each run
+/// against `truth` (per input triangle). With --repeat, the whole grid runs again round by
+/// round, so that a burst of load from other jobs hits every run alike; each run keeps its
+/// shortest time and its largest memory figure. The results are in grid order, off the front.
+fn run_grid(
+    args: &SweepArgs,
+    runs: &[RunSpec],
+    loaded: &Loaded,
+    truth: &[[f64; 3]],
+) -> Result<Vec<RunResult>> {
     let areas: Vec<f64> = (0..loaded.scene.len())
         .map(|t| loaded.scene.area(t))
         .collect();
     let emissive: Vec<bool> = (0..loaded.scene.len())
         .map(|t| loaded.scene.is_emitter(t))
         .collect();
-
-    // 3. Run the grid, one solve at a time (each solve uses every core). With --repeat, the
-    //    whole grid runs again round by round, so that a burst of load from other jobs hits
-    //    every run alike; each run keeps its shortest time and its largest memory figure.
     let mut overall_peak = None;
     let total = runs.len();
     let mut results: Vec<RunResult> = Vec::with_capacity(total);
@@ -351,16 +380,10 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
             }
             let cpu_seconds = cpu_seconds_between(cpu_before, process_cpu_ticks());
             if round > 0 {
-                let r = &mut results[i];
-                r.seconds = r.seconds.min(seconds);
-                r.cpu_seconds = match (r.cpu_seconds, cpu_seconds) {
-                    (Some(a), Some(b)) => Some(a.min(b)),
-                    (a, b) => a.or(b),
-                };
-                r.peak_memory_delta_bytes = r.peak_memory_delta_bytes.max(delta);
+                keep_best(&mut results[i], seconds, cpu_seconds, delta);
                 continue;
             }
-            let error = relative_error(&areas, &emissive, &solution.triangle_radiance, &truth);
+            let error = relative_error(&areas, &emissive, &solution.triangle_radiance, truth);
             let s = &solution.stats;
             // A failed run stays in the table (converged 0) and off the Pareto front.
             if let Err(e) = s.check(args.solver.name()) {
@@ -402,45 +425,56 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
             results.push(result);
         }
     }
+    Ok(results)
+}
+
+/// A repeat of run `r` (a later `--repeat` round): keeps the shorter times and the larger
+/// memory figure.
+fn keep_best(r: &mut RunResult, seconds: f64, cpu_seconds: Option<f64>, delta: Option<u64>) {
+    r.seconds = r.seconds.min(seconds);
+    r.cpu_seconds = match (r.cpu_seconds, cpu_seconds) {
+        (Some(a), Some(b)) => Some(a.min(b)),
+        (a, b) => a.or(b),
+    };
+    r.peak_memory_delta_bytes = r.peak_memory_delta_bytes.max(delta);
+}
+
+/// Sets `pareto` on the runs of the Pareto front of time on `axis` against error; a failed run
+/// is never on it.
+fn mark_pareto_front(results: &mut [RunResult], axis: TimeAxis) {
     let front = pareto_front(
         &results
             .iter()
             .map(|r| {
                 let error = if r.failed { f64::INFINITY } else { r.error };
-                (r.time(args.time_axis), error)
+                (r.time(axis), error)
             })
             .collect::<Vec<_>>(),
     );
     for (r, on_front) in results.iter_mut().zip(front) {
         r.pareto = on_front && !r.failed;
     }
+}
 
-    // 4. Outputs: CSV, plot, table.
-    write_csv(&args.csv, args.solver, &results)?;
-    if let Some(path) = &args.svg {
-        let mut scene_label = args
-            .scene
-            .scene
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        if let Some(y) = args.scene.emit_above {
-            scene_label += &format!(" --emit-above {y}");
-        }
-        if let Some(l) = args.scene.max_edge {
-            scene_label += &format!(" --max-edge {l}");
-        }
-        let title = format!(
-            "{scene_label}: error vs solve time ({} solver)",
-            args.solver.name()
-        );
-        write_svg(path, &title, args.solver, args.time_axis, &results)?;
+/// The plot's title: the scene's file name with the scene options that change it, and the
+/// solver.
+fn plot_title(args: &SweepArgs) -> String {
+    let mut scene_label = args
+        .scene
+        .scene
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    if let Some(y) = args.scene.emit_above {
+        scene_label += &format!(" --emit-above {y}");
     }
-    let mut stdout = std::io::stdout().lock();
-    // A closed pipe (`| head`) is not an error worth a message.
-    let _ = stdout.write_all(table(args.solver, &results).as_bytes());
-    let _ = stdout.flush();
-    Ok(())
+    if let Some(l) = args.scene.max_edge {
+        scene_label += &format!(" --max-edge {l}");
+    }
+    format!(
+        "{scene_label}: error vs solve time ({} solver)",
+        args.solver.name()
+    )
 }
 
 #[cfg(test)]

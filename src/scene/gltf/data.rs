@@ -7,7 +7,7 @@ use base64::Engine;
 use gltf::accessor::{DataType, Dimensions};
 
 use super::scene_err;
-use crate::error::Result;
+use crate::error::{Error, Result};
 
 /// Most elements of an accessor without a buffer view (zeros, optionally with sparse values).
 const MAX_VIEWLESS: usize = 1 << 26;
@@ -131,33 +131,82 @@ pub(super) fn read_accessor<const N: usize>(
     buffers: &[Vec<u8>],
     what: &str,
 ) -> Result<Vec<[f64; N]>> {
-    let fail = |m: String| {
-        scene_err(
-            path,
-            format!("{what} (accessors[{}]): {m}", accessor.index()),
-        )
+    let reader = Reader {
+        path,
+        what,
+        accessor: accessor.index(),
+        buffers,
+        ty: accessor.data_type(),
+        normalized: accessor.normalized(),
     };
     let dims = match accessor.dimensions() {
         Dimensions::Scalar => 1,
         Dimensions::Vec2 => 2,
         Dimensions::Vec3 => 3,
         Dimensions::Vec4 => 4,
-        other => {
-            return Err(fail(format!(
-                "type {other:?} where {N} components are needed"
-            )))
-        }
+        other => return Err(reader.fail(format!("type {other:?} where {N} components are needed"))),
     };
     if dims < N {
-        return Err(fail(format!("{dims} components where {N} are needed")));
+        return Err(reader.fail(format!("{dims} components where {N} are needed")));
     }
-    let ty = accessor.data_type();
-    let size = ty.size();
+    let size = reader.ty.size();
     let elem = size * dims;
     let count = accessor.count();
-    let normalized = accessor.normalized();
-    let decode = |b: &[u8]| -> f64 {
-        match ty {
+    let view = accessor.view();
+    if let Some(view) = &view {
+        let (data, stride) = reader.view_data(view, elem)?;
+        reader.check_rows(data, accessor.offset(), stride, count, elem, view.index())?;
+    } else if count > MAX_VIEWLESS {
+        // Elements without a buffer view are zeros (and sparse values): no buffer bounds them.
+        return Err(reader.fail(format!(
+            "{count} elements without a buffer view (at most {MAX_VIEWLESS})"
+        )));
+    }
+    let mut rows = vec![[0.0f64; N]; count];
+    if let Some(view) = view {
+        let (data, stride) = reader.view_data(&view, elem)?;
+        for (i, row) in rows.iter_mut().enumerate() {
+            let at = accessor.offset() + i * stride;
+            for (k, x) in row.iter_mut().enumerate() {
+                *x = reader.decode(&data[at + k * size..]);
+            }
+        }
+    }
+    if let Some(sparse) = accessor.sparse() {
+        reader.apply_sparse(&sparse, elem, &mut rows)?;
+    }
+    Ok(rows)
+}
+
+/// What reading one accessor needs: where its errors point, the buffers, its component type.
+struct Reader<'a> {
+    /// The glTF file, for messages.
+    path: &'a Path,
+    /// What the accessor holds, for messages.
+    what: &'a str,
+    /// The accessor's index, for messages.
+    accessor: usize,
+    /// The file's buffers.
+    buffers: &'a [Vec<u8>],
+    /// The component type.
+    ty: DataType,
+    /// Integer components are normalized.
+    normalized: bool,
+}
+
+impl<'a> Reader<'a> {
+    /// The error `m` about this accessor.
+    fn fail(&self, m: String) -> Error {
+        scene_err(
+            self.path,
+            format!("{} (accessors[{}]): {m}", self.what, self.accessor),
+        )
+    }
+
+    /// The component at the start of `b`.
+    fn decode(&self, b: &[u8]) -> f64 {
+        let normalized = self.normalized;
+        match self.ty {
             DataType::F32 => f32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64,
             DataType::U8 => {
                 let v = b[0] as f64;
@@ -193,18 +242,20 @@ pub(super) fn read_accessor<const N: usize>(
             }
             DataType::U32 => u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64,
         }
-    };
-    // (data of the view, stride) after checking the view against its buffer.
-    let view_data = |view: &gltf::buffer::View, elem: usize| -> Result<(&[u8], usize)> {
-        let buffer = buffers.get(view.buffer().index()).ok_or_else(|| {
-            fail(format!(
+    }
+
+    /// (data of the view, stride) after checking the view against its buffer; `elem`: bytes per
+    /// element.
+    fn view_data(&self, view: &gltf::buffer::View, elem: usize) -> Result<(&'a [u8], usize)> {
+        let buffer = self.buffers.get(view.buffer().index()).ok_or_else(|| {
+            self.fail(format!(
                 "bufferViews[{}] names a missing buffer",
                 view.index()
             ))
         })?;
         let end = view.offset().checked_add(view.length());
         let Some(data) = end.and_then(|end| buffer.get(view.offset()..end)) else {
-            return Err(fail(format!(
+            return Err(self.fail(format!(
                 "bufferViews[{}] (bytes {}..{}) lies outside buffers[{}] ({} bytes)",
                 view.index(),
                 view.offset(),
@@ -215,20 +266,25 @@ pub(super) fn read_accessor<const N: usize>(
         };
         let stride = view.stride().unwrap_or(elem);
         if stride < elem {
-            return Err(fail(format!(
+            return Err(self.fail(format!(
                 "bufferViews[{}] byteStride {stride} is smaller than an element ({elem} bytes)",
                 view.index()
             )));
         }
         Ok((data, stride))
-    };
-    let slice_rows = |data: &[u8],
-                      offset: usize,
-                      stride: usize,
-                      n: usize,
-                      elem: usize,
-                      view: usize|
-     -> Result<()> {
+    }
+
+    /// Checks that `n` elements of `elem` bytes from byte `offset` with `stride` fit in `data`,
+    /// the bytes of buffer view `view`.
+    fn check_rows(
+        &self,
+        data: &[u8],
+        offset: usize,
+        stride: usize,
+        n: usize,
+        elem: usize,
+        view: usize,
+    ) -> Result<()> {
         if n == 0 {
             return Ok(());
         }
@@ -238,43 +294,32 @@ pub(super) fn read_accessor<const N: usize>(
             .and_then(|x| x.checked_add(elem));
         match need {
             Some(need) if need <= data.len() => Ok(()),
-            _ => Err(fail(format!(
+            _ => Err(self.fail(format!(
                 "{n} elements from byte {offset} with stride {stride} need more than the {} bytes of bufferViews[{view}]",
                 data.len()
             ))),
         }
-    };
-    let view = accessor.view();
-    if let Some(view) = &view {
-        let (data, stride) = view_data(view, elem)?;
-        slice_rows(data, accessor.offset(), stride, count, elem, view.index())?;
-    } else if count > MAX_VIEWLESS {
-        // Elements without a buffer view are zeros (and sparse values): no buffer bounds them.
-        return Err(fail(format!(
-            "{count} elements without a buffer view (at most {MAX_VIEWLESS})"
-        )));
     }
-    let mut rows = vec![[0.0f64; N]; count];
-    if let Some(view) = view {
-        let (data, stride) = view_data(&view, elem)?;
-        for (i, row) in rows.iter_mut().enumerate() {
-            let at = accessor.offset() + i * stride;
-            for (k, x) in row.iter_mut().enumerate() {
-                *x = decode(&data[at + k * size..]);
-            }
-        }
-    }
-    if let Some(sparse) = accessor.sparse() {
+
+    /// Writes the `sparse` values (elements of `elem` bytes) into `rows`, bounds checked.
+    fn apply_sparse<const N: usize>(
+        &self,
+        sparse: &gltf::accessor::sparse::Sparse,
+        elem: usize,
+        rows: &mut [[f64; N]],
+    ) -> Result<()> {
+        let count = rows.len();
+        let size = self.ty.size();
         let n = sparse.count();
         let indices = sparse.indices();
         let isize = indices.index_type().size();
-        let (idata, istride) = view_data(&indices.view(), isize)?;
+        let (idata, istride) = self.view_data(&indices.view(), isize)?;
         let istride = if indices.view().stride().is_some() {
             istride
         } else {
             isize
         };
-        slice_rows(
+        self.check_rows(
             idata,
             indices.offset(),
             istride,
@@ -283,13 +328,13 @@ pub(super) fn read_accessor<const N: usize>(
             indices.view().index(),
         )?;
         let values = sparse.values();
-        let (vdata, vstride) = view_data(&values.view(), elem)?;
+        let (vdata, vstride) = self.view_data(&values.view(), elem)?;
         let vstride = if values.view().stride().is_some() {
             vstride
         } else {
             elem
         };
-        slice_rows(
+        self.check_rows(
             vdata,
             values.offset(),
             vstride,
@@ -306,15 +351,15 @@ pub(super) fn read_accessor<const N: usize>(
                 _ => u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize,
             };
             if index >= count {
-                return Err(fail(format!(
+                return Err(self.fail(format!(
                     "sparse index {index} out of range ({count} elements)"
                 )));
             }
             let vat = values.offset() + s * vstride;
             for k in 0..N {
-                rows[index][k] = decode(&vdata[vat + k * size..]);
+                rows[index][k] = self.decode(&vdata[vat + k * size..]);
             }
         }
+        Ok(())
     }
-    Ok(rows)
 }

@@ -149,9 +149,21 @@ pub(super) fn find_root(parent: &mut [u32], mut i: u32) -> u32 {
 /// directions (bit-identical end points), emit exactly the same radiance and have normals within
 /// [`GROUP_NORMAL_TOLERANCE`]. Every emitter is in exactly one group (often alone).
 pub(super) fn group_emitters(emitters: &Emitters) -> Vec<EmitterGroup> {
+    // 1. Union over shared edges.
+    let mut parent = union_shared_edges(emitters);
+    // 2. Members per group, in emitter order.
+    let groups = members_by_root(&mut parent);
+    // 3. Boundary, plane and bounds of each group.
+    groups
+        .into_iter()
+        .map(|members| build_group(emitters, members))
+        .collect()
+}
+
+/// The union-find forest of the emitters joined over shared edges (see [`group_emitters`]).
+fn union_shared_edges(emitters: &Emitters) -> Vec<u32> {
     use std::collections::HashMap;
     let n = emitters.len();
-    // 1. Union over shared edges.
     let mut parent: Vec<u32> = (0..n as u32).collect();
     let mut edge_owner: HashMap<([u64; 3], [u64; 3]), u32> = HashMap::new();
     for (k, g) in emitters.geom.iter().enumerate() {
@@ -182,113 +194,164 @@ pub(super) fn group_emitters(emitters: &Emitters) -> Vec<EmitterGroup> {
             }
         }
     }
-    // 2. Members per group, in emitter order.
+    parent
+}
+
+/// The members of each tree of the forest `parent`, in element order, the trees in the order
+/// of their roots.
+fn members_by_root(parent: &mut [u32]) -> Vec<Vec<u32>> {
+    use std::collections::HashMap;
     let mut members_of: HashMap<u32, Vec<u32>> = HashMap::new();
-    for k in 0..n as u32 {
-        let root = find_root(&mut parent, k);
+    for k in 0..parent.len() as u32 {
+        let root = find_root(parent, k);
         members_of.entry(root).or_default().push(k);
     }
     let mut roots: Vec<u32> = members_of.keys().copied().collect();
     roots.sort_unstable();
-    // 3. Boundary, plane and bounds of each group.
     roots
         .into_iter()
-        .map(|root| {
-            let members = members_of.remove(&root).unwrap_or_default();
-            // Directed edge (start key, end key) -> (start, end, copies).
-            type DirectedEdges = HashMap<([u64; 3], [u64; 3]), (DVec3, DVec3, u32)>;
-            let mut directed: DirectedEdges = HashMap::new();
-            let mut vertices: HashMap<[u64; 3], DVec3> = HashMap::new();
-            let mut normal_sum = DVec3::ZERO;
-            let mut centroid_sum = DVec3::ZERO;
-            let mut area = 0.0;
-            for &m in &members {
-                let g = &emitters.geom[m as usize];
-                normal_sum += g.normal * g.area;
-                centroid_sum += g.centroid * g.area;
-                area += g.area;
-                for i in 0..3 {
-                    let (a, b) = (g.corners[i], g.corners[(i + 1) % 3]);
-                    vertices.insert(point_key(a), a);
-                    directed
-                        .entry((point_key(a), point_key(b)))
-                        .or_insert((a, b, 0))
-                        .2 += 1;
-                }
-            }
-            // An edge is interior when its reverse belongs to the group too: the pair cancels
-            // (copies beyond a pair stay, so the sum always equals the members' sum).
-            let mut boundary = Vec::new();
-            let mut keys: Vec<_> = directed.keys().copied().collect();
-            keys.sort_unstable();
-            for key in keys {
-                let (a, b, count) = directed[&key];
-                let reverse = directed.get(&(key.1, key.0)).map_or(0, |e| e.2);
-                for _ in 0..count.saturating_sub(reverse) {
-                    boundary.push((a, b));
-                }
-            }
-            let normal = normal_sum.normalize_or_zero();
-            let centroid = centroid_sum / area;
-            let mut vertex_list: Vec<([u64; 3], DVec3)> = vertices.into_iter().collect();
-            vertex_list.sort_unstable_by_key(|v| v.0);
-            let vertices: Vec<DVec3> = vertex_list.into_iter().map(|v| v.1).collect();
-            let center = vertices.iter().copied().sum::<DVec3>() / vertices.len() as f64;
-            let radius = vertices
-                .iter()
-                .map(|v| (*v - center).length())
-                .fold(0.0, f64::max);
-            let thickness = vertices
-                .iter()
-                .map(|v| normal.dot(*v - centroid).abs())
-                .fold(0.0, f64::max);
-            let normal_spread = members
-                .iter()
-                .map(|&m| (emitters.geom[m as usize].normal - normal).length())
-                .fold(0.0, f64::max);
-            let member_cdf = cumulative(members.iter().map(|&m| emitters.geom[m as usize].area));
-            let member_radius = members
-                .iter()
-                .map(|&m| emitters.geom[m as usize].radius)
-                .fold(0.0, f64::max);
-            // Who is across each edge: the member owning its reverse.
-            let edge_of = |m: u32, i: usize| {
-                let c = emitters.geom[m as usize].corners;
-                (point_key(c[i]), point_key(c[(i + 1) % 3]))
-            };
-            let mut owner: HashMap<([u64; 3], [u64; 3]), u32> = HashMap::new();
-            let mut manifold = true;
-            for (local, &m) in members.iter().enumerate() {
-                for i in 0..3 {
-                    manifold &= owner.insert(edge_of(m, i), local as u32).is_none();
-                }
-            }
-            let neighbours: Vec<[u32; 3]> = members
-                .iter()
-                .map(|&m| {
-                    [0, 1, 2].map(|i| {
-                        let (a, b) = edge_of(m, i);
-                        owner.get(&(b, a)).copied().unwrap_or(NO_NEIGHBOUR)
-                    })
-                })
-                .collect();
-            EmitterGroup {
-                emission: emitters.emission[members[0] as usize],
-                member_radius,
-                neighbours,
-                manifold,
-                area,
-                member_cdf,
-                members,
-                boundary,
-                vertices,
-                normal,
-                centroid,
-                normal_spread,
-                thickness,
-                center,
-                radius,
-            }
-        })
+        .map(|root| members_of.remove(&root).unwrap_or_default())
         .collect()
+}
+
+/// The group of `members` (indices into `emitters`, in emitter order): its boundary, plane,
+/// bounds and edge neighbours.
+fn build_group(emitters: &Emitters, members: Vec<u32>) -> EmitterGroup {
+    let Outline {
+        boundary,
+        vertices,
+        normal_sum,
+        centroid_sum,
+        area,
+    } = Outline::of(emitters, &members);
+    let normal = normal_sum.normalize_or_zero();
+    let centroid = centroid_sum / area;
+    let center = vertices.iter().copied().sum::<DVec3>() / vertices.len() as f64;
+    let radius = vertices
+        .iter()
+        .map(|v| (*v - center).length())
+        .fold(0.0, f64::max);
+    let thickness = vertices
+        .iter()
+        .map(|v| normal.dot(*v - centroid).abs())
+        .fold(0.0, f64::max);
+    let normal_spread = members
+        .iter()
+        .map(|&m| (emitters.geom[m as usize].normal - normal).length())
+        .fold(0.0, f64::max);
+    let member_cdf = cumulative(members.iter().map(|&m| emitters.geom[m as usize].area));
+    let member_radius = members
+        .iter()
+        .map(|&m| emitters.geom[m as usize].radius)
+        .fold(0.0, f64::max);
+    let (neighbours, manifold) = edge_neighbours(emitters, &members);
+    EmitterGroup {
+        emission: emitters.emission[members[0] as usize],
+        member_radius,
+        neighbours,
+        manifold,
+        area,
+        member_cdf,
+        members,
+        boundary,
+        vertices,
+        normal,
+        centroid,
+        normal_spread,
+        thickness,
+        center,
+        radius,
+    }
+}
+
+/// A group's outline and area-weighted sums, from its members.
+struct Outline {
+    /// Directed boundary edges, in the order of their end points' keys.
+    boundary: Vec<(DVec3, DVec3)>,
+    /// The members' corners without repeats, in the order of their keys.
+    vertices: Vec<DVec3>,
+    /// Sum of area times unit normal.
+    normal_sum: DVec3,
+    /// Sum of area times centroid.
+    centroid_sum: DVec3,
+    /// Total area.
+    area: f64,
+}
+
+impl Outline {
+    /// The outline of `members` (indices into `emitters`).
+    fn of(emitters: &Emitters, members: &[u32]) -> Outline {
+        use std::collections::HashMap;
+        // Directed edge (start key, end key) -> (start, end, copies).
+        type DirectedEdges = HashMap<([u64; 3], [u64; 3]), (DVec3, DVec3, u32)>;
+        let mut directed: DirectedEdges = HashMap::new();
+        let mut vertices: HashMap<[u64; 3], DVec3> = HashMap::new();
+        let mut normal_sum = DVec3::ZERO;
+        let mut centroid_sum = DVec3::ZERO;
+        let mut area = 0.0;
+        for &m in members {
+            let g = &emitters.geom[m as usize];
+            normal_sum += g.normal * g.area;
+            centroid_sum += g.centroid * g.area;
+            area += g.area;
+            for i in 0..3 {
+                let (a, b) = (g.corners[i], g.corners[(i + 1) % 3]);
+                vertices.insert(point_key(a), a);
+                directed
+                    .entry((point_key(a), point_key(b)))
+                    .or_insert((a, b, 0))
+                    .2 += 1;
+            }
+        }
+        // An edge is interior when its reverse belongs to the group too: the pair cancels
+        // (copies beyond a pair stay, so the sum always equals the members' sum).
+        let mut boundary = Vec::new();
+        let mut keys: Vec<_> = directed.keys().copied().collect();
+        keys.sort_unstable();
+        for key in keys {
+            let (a, b, count) = directed[&key];
+            let reverse = directed.get(&(key.1, key.0)).map_or(0, |e| e.2);
+            for _ in 0..count.saturating_sub(reverse) {
+                boundary.push((a, b));
+            }
+        }
+        let mut vertex_list: Vec<([u64; 3], DVec3)> = vertices.into_iter().collect();
+        vertex_list.sort_unstable_by_key(|v| v.0);
+        let vertices: Vec<DVec3> = vertex_list.into_iter().map(|v| v.1).collect();
+        Outline {
+            boundary,
+            vertices,
+            normal_sum,
+            centroid_sum,
+            area,
+        }
+    }
+}
+
+/// Who is across each edge of each of `members` (see [`EmitterGroup::neighbours`]): the member
+/// owning its reverse; and whether every directed edge has one owner at most
+/// ([`EmitterGroup::manifold`]).
+fn edge_neighbours(emitters: &Emitters, members: &[u32]) -> (Vec<[u32; 3]>, bool) {
+    use std::collections::HashMap;
+    let edge_of = |m: u32, i: usize| {
+        let c = emitters.geom[m as usize].corners;
+        (point_key(c[i]), point_key(c[(i + 1) % 3]))
+    };
+    let mut owner: HashMap<([u64; 3], [u64; 3]), u32> = HashMap::new();
+    let mut manifold = true;
+    for (local, &m) in members.iter().enumerate() {
+        for i in 0..3 {
+            manifold &= owner.insert(edge_of(m, i), local as u32).is_none();
+        }
+    }
+    let neighbours: Vec<[u32; 3]> = members
+        .iter()
+        .map(|&m| {
+            [0, 1, 2].map(|i| {
+                let (a, b) = edge_of(m, i);
+                owner.get(&(b, a)).copied().unwrap_or(NO_NEIGHBOUR)
+            })
+        })
+        .collect();
+    (neighbours, manifold)
 }
