@@ -321,3 +321,31 @@ fn closed_two_sided_tube_under_a_housing_sends_nothing_inward() {
     );
     assert!(d < 0.01, "housing {d}");
 }
+
+/// The relighter re-solves two-sided scenes with both faces: half the light gives half the
+/// underside, warm-started, as a cold solve does.
+#[test]
+fn relighting_a_two_sided_plate_relights_its_underside() {
+    let scene = plate_scene();
+    let options = SolverOptions::default();
+    let mut relighter = antiradiance::Relighter::new(&scene, None, &options).expect("relighter");
+    let first = relighter.solve(&Progress::hidden());
+    let half: Vec<[f64; 3]> = scene.emission.iter().map(|e| e.map(|x| 0.5 * x)).collect();
+    let relit = relighter.relight(&half).expect("relights");
+    let (full, dim) = (
+        mean(&scene, &first.solution.triangle_radiance_back, plate),
+        mean(&scene, &relit.solution.triangle_radiance_back, plate),
+    );
+    assert!(full > 0.0);
+    assert!((dim / full - 0.5).abs() < 0.01, "{dim} vs half of {full}");
+    // A two-sided scene with analytic lights is refused, not relit with stale back faces.
+    let mut lit = scene.clone();
+    lit.lights.push(antiradiance::scene::lights::Light::Sun {
+        direction: glam::DVec3::new(0.0, -1.0, 0.0),
+        irradiance: [1.0; 3],
+    });
+    let err = antiradiance::Relighter::new(&lit, None, &options)
+        .err()
+        .expect("refused");
+    assert!(err.to_string().contains("two-sided"), "{err}");
+}
