@@ -187,6 +187,196 @@ impl SweepContext<'_> {
     }
 }
 
+/// What a sweep's sources are, per element: emission (the source of the front faces), the back
+/// faces' source (empty when no element is two-sided) and albedo, in `C` channels.
+pub(super) struct Sources<'a, const C: usize> {
+    pub(super) emission: &'a [[f64; C]],
+    pub(super) emission_back: &'a [[f64; C]],
+    pub(super) albedo: &'a [[f64; C]],
+}
+
+/// What one sweep's gather reads: the links (and their pair cache), every cluster link's
+/// intensity from the pull, and the state the sweep started from.
+pub(super) struct SweepState<'a, const C: usize> {
+    pub(super) links: &'a Links,
+    pub(super) pairs: Option<&'a PairCache>,
+    pub(super) intensity: &'a [[f32; C]],
+    pub(super) radiance: &'a [[f64; C]],
+    pub(super) radiance_back: &'a [[f64; C]],
+    pub(super) anti: &'a [[f32; C]],
+}
+
+impl SweepContext<'_> {
+    /// Gathers element `e` (step 3 of a sweep): its exact links, then the cluster links into
+    /// it and its ancestors, each with the element's own direction and distance from the
+    /// link's sender (the antiradiance goes to the link's bin, the one its sender reads when it
+    /// passes it on). Writes its new radiance (`b_out`, and `back_out` for a two-sided
+    /// element's back face) and its stored antiradiance bins (`a_out`); `a_acc` is scratch of
+    /// twice the bins. Returns the element's share of the sweep's sums.
+    #[allow(clippy::needless_range_loop)]
+    pub(super) fn gather_element<const C: usize>(
+        &self,
+        e: usize,
+        (sources, state): (&Sources<C>, &SweepState<C>),
+        a_acc: &mut [[f64; C]],
+        (b_out, a_out, back_out): (&mut [f64; C], &mut [[f32; C]], Option<&mut [f64; C]>),
+    ) -> SweepSums {
+        let ctx = self;
+        let nb = self.bins.len();
+        let (links, live, pairs, intensity) =
+            (state.links, self.live, state.pairs, state.intensity);
+        let (radiance, radiance_back, anti) = (state.radiance, state.radiance_back, state.anti);
+        let (emission, emission_back, albedo) =
+            (sources.emission, sources.emission_back, sources.albedo);
+        let (use_anti, two_sided) = (self.use_anti, self.two_sided);
+        let (elem_back, elem_two, elem_area) = (self.elem_back, self.elem_two, self.elem_area);
+        let mut back_out = back_out;
+        a_acc[..nb].fill([0.0; C]);
+        let mut h = [0.0f64; C];
+        let mut h_back = [0.0f64; C];
+        let (mut row, mut row_back) = (0.0, 0.0);
+        for l in links.exact_start[e]..links.exact_start[e + 1] {
+            let s = links.exact_sender[l as usize] as usize;
+            let (sender_back, receiver_back) = links.exact_faces_of(l as usize);
+            let b_s = if sender_back {
+                radiance_back[s]
+            } else {
+                radiance[s]
+            };
+            let (h, row) = if receiver_back {
+                (&mut h_back, &mut row_back)
+            } else {
+                (&mut h, &mut row)
+            };
+            *row += gather_entries(
+                links.exact_entries_of(l as usize),
+                b_s,
+                |bin| {
+                    live.slot(s, bin)
+                        .map_or([0.0; C], |k| anti[k].map(f64::from))
+                },
+                use_anti,
+                two_sided || elem_back[s],
+                h,
+                &mut a_acc[..nb],
+            );
+        }
+        let row = f64::max(row, row_back);
+        let two = elem_two.get(e).copied().unwrap_or(false);
+        let mut add = |l: &ClusterLink, i: &[f32; C], k: PairFactor| {
+            // Negative: light arriving at a two-sided element's back face.
+            let h = if k.irradiance < 0.0 {
+                &mut h_back
+            } else {
+                &mut h
+            };
+            let f = (k.irradiance as f64).abs();
+            for c in 0..C {
+                h[c] += f * i[c] as f64;
+            }
+            if k.anti != 0.0 {
+                let bin = l.bin as usize;
+                for c in 0..C {
+                    a_acc[bin][c] += k.anti as f64 * i[c] as f64;
+                }
+            }
+        };
+        match pairs {
+            // A two-sided element's factors route by their sign.
+            Some(cache) if two => cache.for_each_node(e, |range, factors| {
+                for ((j, l), &[f, g]) in range.clone().zip(&links.cluster[range]).zip(factors) {
+                    add(
+                        l,
+                        &intensity[j],
+                        PairFactor {
+                            irradiance: f,
+                            anti: g,
+                        },
+                    );
+                }
+            }),
+            Some(cache) => {
+                // A stream of multiply-adds: factors, intensities and bins
+                // side by side (a factor of 0 adds nothing), alternate pairs
+                // into two sets of sums so that consecutive adds into one bin
+                // do not wait on each other.
+                let (a_even, a_odd) = a_acc.split_at_mut(nb);
+                let mut h_odd = [0.0f64; C];
+                cache.for_each_node(e, |range, factors| {
+                    let intensity = &intensity[range.clone()];
+                    let bins = &cache.link_bin[range];
+                    let pairs = factors.len() / 2;
+                    for k in 0..pairs {
+                        let (j0, j1) = (2 * k, 2 * k + 1);
+                        let [f0, g0] = factors[j0].map(f64::from);
+                        let [f1, g1] = factors[j1].map(f64::from);
+                        let (i0, i1) = (intensity[j0].map(f64::from), intensity[j1].map(f64::from));
+                        let (b0, b1) = (bins[j0] as usize, bins[j1] as usize);
+                        for c in 0..C {
+                            h[c] += f0 * i0[c];
+                            h_odd[c] += f1 * i1[c];
+                            a_even[b0][c] += g0 * i0[c];
+                            a_odd[b1][c] += g1 * i1[c];
+                        }
+                    }
+                    if factors.len() % 2 == 1 {
+                        let j = factors.len() - 1;
+                        let [f0, g0] = factors[j].map(f64::from);
+                        let (i0, b0) = (intensity[j].map(f64::from), bins[j] as usize);
+                        for c in 0..C {
+                            h[c] += f0 * i0[c];
+                            a_even[b0][c] += g0 * i0[c];
+                        }
+                    }
+                });
+                for c in 0..C {
+                    h[c] += h_odd[c];
+                }
+                for (even, odd) in a_even.iter_mut().zip(a_odd.iter_mut()) {
+                    for c in 0..C {
+                        even[c] += odd[c];
+                    }
+                    *odd = [0.0; C];
+                }
+            }
+            None => ctx.for_each_pair(e, links, |i, l, k| add(l, &intensity[i], k)),
+        }
+        let mut largest = 0.0f64;
+        let mut finite = true;
+        let a = elem_area[e];
+        let (mut num, mut den) = (0.0, 0.0);
+        for c in 0..C {
+            b_out[c] = emission[e][c] + albedo[e][c] * h[c];
+            largest = largest.max(b_out[c].abs());
+            finite &= b_out[c].is_finite();
+        }
+        if let Some(back) = back_out.as_deref_mut() {
+            for c in 0..C {
+                back[c] = emission_back[e][c] + albedo[e][c] * h_back[c];
+                largest = largest.max(back[c].abs());
+                finite &= back[c].is_finite();
+                num += a * (back[c] - radiance_back[e][c]).abs();
+                den += a * back[c].abs();
+            }
+        }
+        for (dst, bin) in a_out.iter_mut().zip(live.bins_of(e)) {
+            *dst = a_acc[bin].map(|x| x as f32);
+            finite &= dst.iter().all(|x| x.is_finite());
+        }
+        num += (0..C)
+            .map(|c| a * (b_out[c] - radiance[e][c]).abs())
+            .sum::<f64>();
+        den += (0..C).map(|c| a * b_out[c].abs()).sum::<f64>();
+        SweepSums {
+            num,
+            den,
+            max_row: row,
+            largest,
+            finite,
+        }
+    }
+}
+
 /// Radiance and antiradiance state as one flat vector (radiance first, then the back faces'
 /// radiance, then the antiradiance slots in order).
 pub(super) fn pack<const C: usize>(
