@@ -1,0 +1,592 @@
+//! The hierarchical solver's iteration: the sweeps of one solve in `C` colour channels, from
+//! its start (cold, warm or going on) through acceleration to the solution and the state the
+//! next solve starts from.
+
+use super::*;
+
+/// Where a solve starts: the per-element source and albedo in `C` channels, the state the
+/// sweeps start from, and how it relates to the warm state given.
+struct Start<const C: usize> {
+    emission: Vec<[f64; C]>,
+    emission_back: Vec<[f64; C]>,
+    albedo: Vec<[f64; C]>,
+    radiance: Vec<[f64; C]>,
+    radiance_back: Vec<[f64; C]>,
+    anti: Vec<[f32; C]>,
+    /// The warm state belongs to this scene.
+    matched: bool,
+    /// It was solved for this very source.
+    same_source: bool,
+    /// It was solved for a source of this length.
+    same_source_len: bool,
+}
+
+/// The per-sweep sums of the senders and the links' intensities, kept between sweeps.
+struct Scratch<const C: usize> {
+    group_b: Vec<[f64; C]>,
+    group_b_back: Vec<[f64; C]>,
+    group_a: Vec<[f64; C]>,
+    intensity: Vec<[f32; C]>,
+}
+
+impl Prepared {
+    /// [`Prepared::solve_from`] in `C` colour channels (1 or 3).
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn solve_channels<const C: usize>(
+        &mut self,
+        patches: &Patches,
+        elem_source: &[[f64; 3]],
+        warm: Option<&ElementState>,
+        resume: Option<Resume>,
+        deadline: Option<Instant>,
+        progress: &Progress,
+    ) -> (Solution, ElementState) {
+        let t0 = Instant::now();
+        let options = &self.options;
+        let nb = self.bins.len();
+        let n = self.element_count();
+        let live = &self.live;
+        let slots = live.slots();
+        let backs = self.elem_two.len();
+        let Start {
+            emission,
+            emission_back,
+            albedo,
+            mut radiance,
+            mut radiance_back,
+            mut anti,
+            matched,
+            same_source,
+            same_source_len,
+        } = self.start_state::<C>(elem_source, warm);
+        let resume = resume.filter(|_| matched);
+        let (resume, going_on) = match resume {
+            Some(r) if same_source => (Some(r), true),
+            other => (other, false),
+        };
+        let mut next_radiance = radiance.clone();
+        let mut next_radiance_back = radiance_back.clone();
+        let mut next_anti = anti.clone();
+        let mut intensity = vec![[0.0f32; C]; self.links.cluster.len()];
+        let mut stats = self.model_stats::<C>();
+        let mut convergence = Convergence::default();
+        convergence.warm = matched && same_source_len;
+        let (bound, mut guard, rho_max) =
+            self.health_start(patches, (&emission, &emission_back), &albedo);
+        // Going on with the same source: its convergence estimate, health checks and counts.
+        let mut first = 1;
+        let mut kept_anderson = None;
+        if let Some(r) = resume {
+            kept_anderson = r
+                .anderson
+                .filter(|a| a.len() == state_len_of::<C>(n + backs, slots));
+            if going_on {
+                convergence = r.convergence;
+                guard = r.guard;
+                first = r.sweeps + 1;
+                stats.max_row_sum = r.max_row_sum;
+                stats.extrapolations = r.extrapolations;
+                stats.damped_after = r.damped_after;
+            }
+        }
+        let mut memory = self.memory.clone();
+        let (mut anderson, acceleration) =
+            self.acceleration::<C>(kept_anderson, going_on, &mut memory);
+        stats.acceleration = acceleration;
+        if anderson.is_some() {
+            convergence.contraction_bound = Some(rho_max);
+            if !going_on {
+                stats.extrapolations = 0;
+            }
+        }
+        let (mut x_flat, mut g_flat) = (Vec::new(), Vec::new());
+        let groups = &self.groups;
+        let mut scratch = Scratch {
+            group_b: vec![[0.0f64; C]; groups.normal.len()],
+            group_b_back: vec![[0.0f64; C]; if backs > 0 { groups.normal.len() } else { 0 }],
+            group_a: vec![[0.0f64; C]; groups.normal.len() * nb],
+            intensity: std::mem::take(&mut intensity),
+        };
+        let sources = Sources {
+            emission: &emission,
+            emission_back: &emission_back,
+            albedo: &albedo,
+        };
+
+        let mut last = first - 1;
+        for iteration in first..first + options.max_iterations {
+            let sweep_start = Instant::now();
+            last = iteration;
+            let sums = self.sweep_once(
+                &sources,
+                &mut scratch,
+                (&radiance, &radiance_back, &anti),
+                (&mut next_radiance, &mut next_radiance_back, &mut next_anti),
+            );
+            if iteration == first && !going_on {
+                stats.max_row_sum = sums.max_row;
+            }
+            let change = change_ratio(sums.num, sums.den);
+            std::mem::swap(&mut radiance, &mut next_radiance);
+            std::mem::swap(&mut radiance_back, &mut next_radiance_back);
+            std::mem::swap(&mut anti, &mut next_anti);
+            if end_sweep(
+                iteration,
+                change,
+                sums.num,
+                sums.largest,
+                sums.finite,
+                options.tol,
+                &mut guard,
+                &mut convergence,
+                &mut stats,
+                progress,
+            ) {
+                break;
+            }
+            if start_damping(iteration, &mut guard, &mut convergence, &mut stats) {
+                if let Some(acc) = anderson.as_mut() {
+                    acc.restart();
+                }
+            }
+            damp_if_damped(
+                &guard,
+                (&mut radiance, &next_radiance),
+                (&mut anti, &next_anti),
+            );
+            if guard.damped() {
+                crate::solve::health::damp(&mut radiance_back, &next_radiance_back);
+            }
+            if self.mix_step(
+                anderson.as_mut(),
+                &mut convergence,
+                (&mut radiance, &mut radiance_back, &mut anti),
+                (&next_radiance, &next_radiance_back, &next_anti),
+                (&mut x_flat, &mut g_flat),
+            ) {
+                stats.extrapolations += 1;
+            }
+            // Out of time when the next sweep, as long as this one, would end after the
+            // deadline.
+            if let Some(deadline) = deadline {
+                let now = Instant::now();
+                if now + (now - sweep_start) > deadline {
+                    break;
+                }
+            }
+        }
+        stats.iterations = last + 1 - first;
+        stats.residual = convergence.residual;
+
+        self.finish_channels(
+            patches,
+            elem_source,
+            t0,
+            (radiance, radiance_back, anti),
+            (stats, memory, bound),
+            (anderson, convergence, guard, last),
+        )
+    }
+
+    /// The state the next sweep starts from, after the sweep from `(radiance, ..)` gave
+    /// `next`: Anderson's mix of the last sweeps' outputs, else (once the sweeps contract at a
+    /// steady ratio) a jump over the geometric tail. Returns true when it extrapolated.
+    #[allow(clippy::type_complexity)]
+    fn mix_step<const C: usize>(
+        &self,
+        anderson: Option<&mut Anderson>,
+        convergence: &mut Convergence,
+        (radiance, radiance_back, anti): (
+            &mut Vec<[f64; C]>,
+            &mut Vec<[f64; C]>,
+            &mut Vec<[f32; C]>,
+        ),
+        (next_radiance, next_radiance_back, next_anti): (&[[f64; C]], &[[f64; C]], &[[f32; C]]),
+        (x_flat, g_flat): (&mut Vec<f64>, &mut Vec<f64>),
+    ) -> bool {
+        match anderson {
+            // Anderson: the next state mixes the last sweeps' outputs.
+            Some(acc) => {
+                pack((next_radiance, next_radiance_back), next_anti, x_flat);
+                pack((radiance, radiance_back), anti, g_flat);
+                acc.step(x_flat, g_flat);
+                unpack(x_flat, (radiance, radiance_back), anti);
+            }
+            // Else, once the sweeps contract at a steady ratio, jump over the geometric tail.
+            None => {
+                if let Some(k) = convergence.extrapolation_factor() {
+                    extrapolate(radiance, next_radiance, k);
+                    extrapolate(radiance_back, next_radiance_back, k);
+                    extrapolate(anti, next_anti, k);
+                    return true;
+                }
+            }
+        }
+        false
+    }
+
+    /// A solve's statistics as they start: links, the solver's bytes and what the model
+    /// stores, in `C` channels.
+    fn model_stats<const C: usize>(&self) -> SolveStats {
+        let (n, nb, slots) = (self.element_count(), self.bins.len(), self.live.slots());
+        // Three channels and every bin of every element, against what this solve stores.
+        let full_bytes = 2 * (n as u64 * 24 + (n * nb) as u64 * 12);
+        let used_bytes = self.state_bytes(C as u64);
+        SolveStats {
+            links: self.links.len() as u64,
+            solver_bytes: self.static_bytes() + used_bytes,
+            model: Some(ModelStats {
+                channels: C,
+                antiradiance: self.use_anti,
+                convex_enclosure: self.convex,
+                back_blocking_patches: self.back_blocking_patches,
+                anti_bins_stored: slots as u64,
+                anti_bins_full: (n * nb) as u64,
+                bytes_saved: full_bytes.saturating_sub(used_bytes),
+            }),
+            ..SolveStats::default()
+        }
+    }
+
+    /// The sources of `elem_source` in `C` channels and the state the sweeps start from: `warm`
+    /// when it belongs to this scene (moved by the change of its source when that changed),
+    /// else the source itself.
+    fn start_state<const C: usize>(
+        &self,
+        elem_source: &[[f64; 3]],
+        warm: Option<&ElementState>,
+    ) -> Start<C> {
+        let n = self.element_count();
+        let slots = self.live.slots();
+        // Back faces: dense per element (0 for one-sided ones) when some element is two-sided.
+        let backs = self.elem_two.len();
+        let dense_back = |faces: &[[f64; 3]]| -> Vec<[f64; C]> {
+            let mut back = vec![[0.0; C]; backs];
+            for (&e, &s) in self.back_faces.iter().zip(&faces[n..]) {
+                back[e as usize] = channels_of(s);
+            }
+            back
+        };
+        let emission: Vec<[f64; C]> = elem_source[..n].iter().map(|&s| channels_of(s)).collect();
+        let emission_back = dense_back(elem_source);
+        let albedo: Vec<[f64; C]> = self.elem_albedo.iter().map(|&a| channels_of(a)).collect();
+        // A warm start that belongs to this scene: the same source goes on with its iteration;
+        // another one moves each element's radiance by the change of its source.
+        let warm = (warm.and_then(|w| w.to_channels::<C>(n, backs, slots)))
+            .zip(warm)
+            .map(|(values, w)| (w, values));
+        let matched = warm.is_some();
+        let faces = elem_source.len();
+        let same_source_len = warm.as_ref().is_some_and(|(w, _)| w.source.len() == faces);
+        let same_source = warm.as_ref().is_some_and(|(w, _)| w.source == elem_source);
+        let (radiance, radiance_back, anti) = match warm {
+            Some((w, (mut radiance, mut radiance_back, mut anti))) => {
+                if !same_source && w.source.len() == faces {
+                    // The old state scaled per channel by the least-squares factor of the new
+                    // source against the old one (exact when every light changed by one factor),
+                    // then moved by what that leaves of the change.
+                    let old: Vec<[f64; C]> =
+                        w.source[..n].iter().map(|&s| channels_of(s)).collect();
+                    let old_back = dense_back(&w.source);
+                    let k = source_factor(&emission, &old, &self.elem_area);
+                    let fronts = radiance.iter_mut().zip(emission.iter().zip(&old));
+                    let back_faces = radiance_back
+                        .iter_mut()
+                        .zip(emission_back.iter().zip(&old_back));
+                    for (b, (new, old)) in fronts.chain(back_faces) {
+                        for c in 0..C {
+                            b[c] = k[c] * b[c] + new[c] - k[c] * old[c];
+                        }
+                    }
+                    for a in anti.iter_mut() {
+                        for c in 0..C {
+                            a[c] = (k[c] * a[c] as f64) as f32;
+                        }
+                    }
+                }
+                (radiance, radiance_back, anti)
+            }
+            None => (
+                emission.clone(),
+                emission_back.clone(),
+                vec![[0.0f32; C]; slots],
+            ),
+        };
+        Start {
+            emission,
+            emission_back,
+            albedo,
+            radiance,
+            radiance_back,
+            anti,
+            matched,
+            same_source,
+            same_source_len,
+        }
+    }
+
+    /// The bound on B of a solve of this source (the maximum principle; `None` for unoccluded
+    /// radiosity), its health guard, and the largest albedo.
+    fn health_start<const C: usize>(
+        &self,
+        patches: &Patches,
+        (emission, emission_back): (&[[f64; C]], &[[f64; C]]),
+        albedo: &[[f64; C]],
+    ) -> (Option<f64>, Guard, f64) {
+        let options = &self.options;
+        // The bound on B (maximum principle; not for unoccluded radiosity) and the mass the
+        // sweeps' changes are measured against.
+        let rho_max = albedo
+            .iter()
+            .flat_map(|a| a.iter().copied())
+            .fold(0.0f64, f64::max);
+        let source_max = emission
+            .iter()
+            .chain(emission_back)
+            .flat_map(|s| s.iter().map(|x| x.abs()))
+            .fold(0.0f64, f64::max);
+        let reference_mass: f64 = emission
+            .iter()
+            .zip(&self.elem_area)
+            .chain(emission_back.iter().zip(&self.elem_area))
+            .map(|(s, &a)| a * s.iter().map(|x| x.abs()).sum::<f64>())
+            .sum::<f64>()
+            / (1.0 - rho_max.clamp(0.0, 0.9999));
+        let bound = options
+            .antiradiance
+            .then(|| health::radiance_bound(source_max, rho_max));
+        let guard = Guard::new(bound, reference_mass, patches.emission_scale);
+        (bound, guard, rho_max)
+    }
+
+    /// Anderson acceleration for a solve (`kept` the previous solve's history, reset to a new
+    /// source unless `going_on`), or why not, as `stats.acceleration` says it; its history is
+    /// added to `memory`'s estimate, or its absence to what was coarsened.
+    fn acceleration<const C: usize>(
+        &self,
+        kept_anderson: Option<Anderson>,
+        going_on: bool,
+        memory: &mut MemoryStats,
+    ) -> (Option<Anderson>, String) {
+        let (options, live) = (&self.options, &self.live);
+        let (n, nb, slots) = (self.element_count(), self.bins.len(), live.slots());
+        let backs = self.elem_two.len();
+        // Anderson acceleration when its history (and the flat copies of the state it mixes)
+        // fits its own budget and what the model leaves of the memory limit; its residuals
+        // shrink faster than the plain sweep's contraction, so the remaining error is estimated
+        // with the largest albedo as the contraction bound instead.
+        let state_len = state_len_of::<C>(n + backs, slots);
+        let depth = options.acceleration_depth;
+        let history = Anderson::bytes(state_len, depth) + 16 * state_len as u64;
+        let mb = |bytes: u64| bytes.div_ceil(1 << 20);
+        let off = if depth == 0 {
+            Some("acceleration_depth 0".to_string())
+        } else if history > ACCELERATION_BUDGET_BYTES {
+            Some(format!(
+                "Anderson history of {} MB over its {} MB budget",
+                mb(history),
+                mb(ACCELERATION_BUDGET_BYTES)
+            ))
+        } else if history > self.budget.spare(memory.estimate_bytes) {
+            memory.coarsened.push("Anderson acceleration off".into());
+            Some(format!(
+                "Anderson history of {} MB over what the memory limit leaves",
+                mb(history)
+            ))
+        } else {
+            memory.estimate_bytes += history;
+            None
+        };
+        let accelerate = off.is_none();
+        let acceleration = match off {
+            None => "anderson".into(),
+            Some(why) => format!("extrapolation ({why})"),
+        };
+        let anderson = accelerate.then(|| {
+            if let Some(mut kept) = kept_anderson {
+                if !going_on {
+                    kept.new_source();
+                }
+                return kept;
+            }
+            let mut weight = Vec::with_capacity(state_len);
+            for &a in self.elem_area.iter().chain(&self.elem_area[..backs]) {
+                weight.extend(std::iter::repeat_n(a, C));
+            }
+            for e in 0..n {
+                let w = self.elem_area[e] / nb as f64;
+                let k = (live.start[e + 1] - live.start[e]) as usize * C;
+                weight.extend(std::iter::repeat_n(w, k));
+            }
+            Anderson::new(depth, weight)
+        });
+        (anderson, acceleration)
+    }
+
+    /// One Jacobi sweep from the state `from` into `to`: sender summaries, pull, gather.
+    /// Returns the sweep's sums.
+    #[allow(clippy::type_complexity)]
+    fn sweep_once<const C: usize>(
+        &self,
+        sources: &Sources<C>,
+        scratch: &mut Scratch<C>,
+        (radiance, radiance_back, anti): (&[[f64; C]], &[[f64; C]], &[[f32; C]]),
+        (next_radiance, next_radiance_back, next_anti): (
+            &mut [[f64; C]],
+            &mut [[f64; C]],
+            &mut [[f32; C]],
+        ),
+    ) -> SweepSums {
+        let (live, links, groups) = (&self.live, &self.links, &self.groups);
+        let (n, nb, backs) = (self.element_count(), self.bins.len(), self.elem_two.len());
+        let (pairs, elem_area) = (self.pairs.as_ref(), &self.elem_area);
+        let ctx = self.sweep_context();
+        let Scratch {
+            group_b,
+            group_b_back,
+            group_a,
+            intensity,
+        } = scratch;
+        // 1. Sender summaries: per normal group of every large node, the area-weighted sums of
+        //    B and of each antiradiance bin (bottom-up, children before parents).
+        groups.accumulate(
+            (&radiance, &radiance_back),
+            &anti,
+            live,
+            elem_area,
+            nb,
+            (group_b, group_b_back),
+            group_a,
+        );
+
+        // 2. Pull: the radiant intensity every cluster link's sender sends along the link.
+        intensity
+            .par_iter_mut()
+            .zip(links.cluster.par_iter())
+            .for_each(|(out, l)| {
+                *out = ctx.pull(
+                    l,
+                    groups,
+                    (&group_b, &group_b_back),
+                    &group_a,
+                    (&radiance, &radiance_back),
+                    &anti,
+                );
+            });
+
+        // 3. Gather per element: exact links, then the cluster links into it and its ancestors,
+        //    each with the element's own direction and distance from the link's sender (the
+        //    antiradiance goes to the link's bin, the one its sender reads when it passes it on).
+        //    Only the element's stored bins are kept.
+        let anti_out = split_by_start(next_anti, &live.start);
+        let mut back_out: Vec<Option<&mut [f64; C]>> = if backs > 0 {
+            next_radiance_back.iter_mut().map(Some).collect()
+        } else {
+            (0..n).map(|_| None).collect()
+        };
+        let state = SweepState {
+            links,
+            pairs,
+            intensity: &intensity,
+            radiance: &radiance,
+            radiance_back: &radiance_back,
+            anti: &anti,
+        };
+        let change_parts: Vec<SweepSums> = next_radiance
+            .par_iter_mut()
+            .zip(anti_out.into_par_iter())
+            .zip(back_out.par_iter_mut())
+            .enumerate()
+            .map_init(
+                || vec![[0.0f64; C]; 2 * nb],
+                |a_acc, (e, ((b_out, a_out), back_out))| {
+                    ctx.gather_element(
+                        e,
+                        (&sources, &state),
+                        a_acc,
+                        (b_out, a_out, back_out.as_deref_mut()),
+                    )
+                },
+            )
+            .collect();
+
+        let sums = change_parts
+            .iter()
+            .fold(SweepSums::default(), |acc, p| acc.add(*p));
+        sums
+    }
+
+    /// The solution and the state of a finished solve: elements to patches, the statistics
+    /// and health checks of the result, the state to warm-start from.
+    #[allow(clippy::type_complexity)]
+    fn finish_channels<const C: usize>(
+        &mut self,
+        patches: &Patches,
+        elem_source: &[[f64; 3]],
+        t0: Instant,
+        (radiance, radiance_back, anti): (Vec<[f64; C]>, Vec<[f64; C]>, Vec<[f32; C]>),
+        (mut stats, mut memory, bound): (SolveStats, MemoryStats, Option<f64>),
+        (anderson, convergence, guard, last): (Option<Anderson>, Convergence, Guard, usize),
+    ) -> (Solution, ElementState) {
+        let (options, elem_area) = (&self.options, &self.elem_area);
+        let (n, backs) = (self.element_count(), self.elem_two.len());
+        // Elements -> patches (area-weighted mean, RGB); patches without elements (inactive) get
+        // 0 here and their emission from `solve_with_emission`.
+        let radiance_rgb: Vec<[f64; 3]> = radiance.iter().map(|&b| rgb_of(b)).collect();
+        let radiance_back_rgb: Vec<[f64; 3]> = radiance_back.iter().map(|&b| rgb_of(b)).collect();
+        let means = |values: &[[f64; 3]]| -> Vec<[f64; 3]> {
+            crate::mesh::patch_means(
+                patches.len(),
+                (0..values.len()).map(|e| (self.elem_patch[e] as usize, elem_area[e], values[e])),
+            )
+            .into_iter()
+            .map(|m| m.unwrap_or([0.0; 3]))
+            .collect()
+        };
+        let patch_radiance = means(&radiance_rgb);
+        let patch_radiance_back = if backs > 0 {
+            means(&radiance_back_rgb)
+        } else {
+            Vec::new()
+        };
+        self.timings.iterate = t0.elapsed().as_secs_f64();
+        stats.stage_seconds = Some(self.timings.clone());
+        stats.link_stats = Some(crate::solve::solution::LinkReport {
+            cluster_links: self.links.cluster.len() as u64,
+            exact_links: self.links.exact_sender.len() as u64,
+            refinement: self.links.stats.clone(),
+        });
+        stats.elements = n;
+        (stats.element_link_pairs, stats.pull_terms) = self.sweep_work();
+        memory.peak_bytes = crate::memory::peak_rss_bytes();
+        stats.memory = Some(memory);
+        // The result is checked against the bound of this solve's source (with exact direct
+        // light, the reflected direct light: a tighter bound than the emission's).
+        let solution = crate::solve::solution::finish_sides(
+            patches,
+            patch_radiance,
+            patch_radiance_back,
+            stats,
+            options.clamp_negative,
+            bound,
+        );
+        let resume = Resume {
+            anderson,
+            convergence,
+            guard,
+            sweeps: last,
+            max_row_sum: solution.stats.max_row_sum,
+            extrapolations: solution.stats.extrapolations,
+            damped_after: solution.stats.damped_after,
+        };
+        let state = ElementState {
+            radiance: radiance_rgb,
+            radiance_back: radiance_back_rgb,
+            anti: anti.iter().flatten().copied().collect(),
+            channels: C,
+            source: elem_source.to_vec(),
+            resume: Some(Box::new(resume)),
+        };
+        (solution, state)
+    }
+}
