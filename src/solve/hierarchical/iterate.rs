@@ -450,8 +450,8 @@ impl Prepared {
         // 1. Sender summaries: per normal group of every large node, the area-weighted sums of
         //    B and of each antiradiance bin (bottom-up, children before parents).
         groups.accumulate(
-            (&radiance, &radiance_back),
-            &anti,
+            (radiance, radiance_back),
+            anti,
             live,
             elem_area,
             nb,
@@ -467,10 +467,10 @@ impl Prepared {
                 *out = ctx.pull(
                     l,
                     groups,
-                    (&group_b, &group_b_back),
-                    &group_a,
-                    (&radiance, &radiance_back),
-                    &anti,
+                    (group_b, group_b_back),
+                    group_a,
+                    (radiance, radiance_back),
+                    anti,
                 );
             });
 
@@ -487,10 +487,10 @@ impl Prepared {
         let state = SweepState {
             links,
             pairs,
-            intensity: &intensity,
-            radiance: &radiance,
-            radiance_back: &radiance_back,
-            anti: &anti,
+            intensity,
+            radiance,
+            radiance_back,
+            anti,
         };
         let change_parts: Vec<SweepSums> = next_radiance
             .par_iter_mut()
@@ -502,7 +502,7 @@ impl Prepared {
                 |a_acc, (e, ((b_out, a_out), back_out))| {
                     ctx.gather_element(
                         e,
-                        (&sources, &state),
+                        (sources, &state),
                         a_acc,
                         (b_out, a_out, back_out.as_deref_mut()),
                     )

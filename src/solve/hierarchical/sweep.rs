@@ -230,7 +230,6 @@ impl SweepContext<'_> {
             (sources.emission, sources.emission_back, sources.albedo);
         let (use_anti, two_sided) = (self.use_anti, self.two_sided);
         let (elem_back, elem_two, elem_area) = (self.elem_back, self.elem_two, self.elem_area);
-        let mut back_out = back_out;
         a_acc[..nb].fill([0.0; C]);
         let mut h = [0.0f64; C];
         let mut h_back = [0.0f64; C];
@@ -350,7 +349,7 @@ impl SweepContext<'_> {
             largest = largest.max(b_out[c].abs());
             finite &= b_out[c].is_finite();
         }
-        if let Some(back) = back_out.as_deref_mut() {
+        if let Some(back) = back_out {
             for c in 0..C {
                 back[c] = emission_back[e][c] + albedo[e][c] * h_back[c];
                 largest = largest.max(back[c].abs());
