@@ -1,0 +1,251 @@
+//! Building a [`Prepared`] scene: the tree, the links and the element arrays within the
+//! memory budget, coarsened step by step until the model fits.
+
+use super::*;
+
+impl Prepared {
+    /// Builds the tree and refines the links for `patches` within the memory limit of
+    /// `options` ([`SolverOptions::memory_limit_bytes`], see [`crate::solve::budget`]): a model whose
+    /// estimate does not fit is coarsened step by step ([`budget::coarser`]; the pair cache is
+    /// left out first), and [`Prepared::memory`] says what was changed. `record_culled` keeps
+    /// the culled pairs (for [`links::validate`]).
+    ///
+    /// Errors: [`crate::Error::Memory`] when even the coarsest model does not fit (raised
+    /// before its large arrays are allocated).
+    pub fn new(
+        patches: &Patches,
+        options: &SolverOptions,
+        record_culled: bool,
+    ) -> Result<Prepared> {
+        let budget = Budget::start(options.memory_limit());
+        let tree_bytes = HierarchicalCosts::tree_bytes(patches.len() as u64);
+        if !budget.fits(tree_bytes) {
+            return Err(budget.does_not_fit(
+                &format!("the cluster tree of {} patches", patches.len()),
+                tree_bytes,
+                "raise SolverOptions::memory_limit_bytes",
+            ));
+        }
+        let channels = channels_needed(patches);
+        let mut model = options.clone();
+        let mut coarsened = Vec::new();
+        let mut attempts = 0;
+        let mut discarded_seconds = 0.0;
+        loop {
+            let link_budget = LinkBudget {
+                costs: HierarchicalCosts::new(model.bins, channels),
+                budget,
+                patches: patches.len() as u64,
+            };
+            attempts += 1;
+            let t_attempt = Instant::now();
+            let over = match Prepared::build(patches, &model, record_culled, &link_budget) {
+                Ok(mut prepared) => {
+                    coarsened.append(&mut prepared.memory.coarsened);
+                    prepared.memory = MemoryStats {
+                        limit_bytes: budget.limit,
+                        base_bytes: budget.base,
+                        coarsened,
+                        attempts,
+                        epsilon: model.epsilon,
+                        bins: model.bins,
+                        split_depth: model.split_depth,
+                        discarded_seconds,
+                        ..prepared.memory
+                    };
+                    return Ok(prepared);
+                }
+                Err(over) => over,
+            };
+            discarded_seconds += t_attempt.elapsed().as_secs_f64();
+            match budget::coarser(&model) {
+                Some((next, step)) => {
+                    coarsened.push(step);
+                    model = next;
+                }
+                None => {
+                    return Err(budget.does_not_fit(
+                        &format!(
+                            "the hierarchical model of {} patches even at its coarsest (epsilon {}, split depth {}, {}x{} bins, no pair cache)",
+                            patches.len(),
+                            model.epsilon,
+                            model.split_depth,
+                            model.bins,
+                            model.bins
+                        ),
+                        over.estimate,
+                        "raise SolverOptions::memory_limit_bytes",
+                    ))
+                }
+            }
+        }
+    }
+
+    /// One attempt of [`Prepared::new`] with the model of `options`: tree, links, element
+    /// arrays, groups, live bins and (when it fits) the pair cache, or [`OverBudget`] as soon
+    /// as the estimate exceeds `link_budget`.
+    fn build(
+        patches: &Patches,
+        options: &SolverOptions,
+        record_culled: bool,
+        link_budget: &LinkBudget,
+    ) -> std::result::Result<Prepared, OverBudget> {
+        let bins = Bins::new(options.bins);
+        let t0 = Instant::now();
+        let mut tree = ClusterTree::build(patches);
+        let model::Backs {
+            blocking: back_blocking,
+            faces: two_sided,
+        } = model::Backs::of(patches, options);
+        tree.mark_back_blocking(&back_blocking);
+        tree.mark_two_sided(&two_sided);
+        let t1 = Instant::now();
+        let links = links::refine(
+            &mut tree,
+            &bins,
+            &link_params(options),
+            &options.coupling(),
+            record_culled,
+            link_budget,
+        )?;
+        let t2 = Instant::now();
+        debug_assert!(tree.validate().is_ok(), "{:?}", tree.validate());
+        let mut prepared = Prepared {
+            elem_area: Vec::with_capacity(tree.elements.len()),
+            elem_normal: Vec::with_capacity(tree.elements.len()),
+            elem_center: Vec::with_capacity(tree.elements.len()),
+            elem_albedo: Vec::with_capacity(tree.elements.len()),
+            elem_patch: Vec::with_capacity(tree.elements.len()),
+            elem_back: Vec::with_capacity(tree.elements.len()),
+            elem_two: Vec::new(),
+            back_faces: Vec::new(),
+            back_blocking_patches: back_blocking.iter().filter(|&&b| b).count() as u64,
+            groups: SenderGroups::default(),
+            live: LiveBins::default(),
+            pairs: None,
+            work: (0, 0),
+            albedo_grey: true,
+            convex: false,
+            use_anti: options.antiradiance,
+            tree,
+            links,
+            bins,
+            options: options.clone(),
+            budget: link_budget.budget,
+            memory: MemoryStats::default(),
+            timings: HierarchyTimings {
+                tree: (t1 - t0).as_secs_f64(),
+                links: (t2 - t1).as_secs_f64(),
+                model: 0.0,
+                iterate: 0.0,
+                direct: 0.0,
+            },
+        };
+        prepared.fill_elements(patches, two_sided.iter().any(|&b| b));
+        prepared.groups = SenderGroups::build(
+            &prepared.tree,
+            &prepared.elem_area,
+            &prepared.elem_normal,
+            &prepared.elem_back,
+        );
+        prepared.work = prepared.count_sweep_work();
+        // Model only what the scene needs: grey albedos allow one-channel solves; a convex
+        // enclosure needs no antiradiance; each element stores only the bins links use.
+        prepared.albedo_grey = prepared.elem_albedo.iter().all(|&a| model::is_grey(a));
+        prepared.convex = model::is_convex_enclosure(&prepared.tree);
+        prepared.use_anti = options.antiradiance && !prepared.convex;
+        prepared.fit_model(patches, link_budget)?;
+        prepared.timings.model = t2.elapsed().as_secs_f64();
+        Ok(prepared)
+    }
+
+    /// Fills the per-element arrays from the finalized tree: area, normal, centroid, albedo,
+    /// patch and back blocking, and (`any_two_sided`) which elements have a back face.
+    fn fill_elements(&mut self, patches: &Patches, any_two_sided: bool) {
+        for &node in &self.tree.elements {
+            let n = &self.tree.nodes[node as usize];
+            self.elem_area.push(n.area);
+            self.elem_normal
+                .push(n.plane.map(|p| p.0).unwrap_or(DVec3::Z));
+            self.elem_center.push(n.centroid);
+            self.elem_albedo.push(patches.albedo[n.patch as usize]);
+            self.elem_patch.push(n.patch);
+            self.elem_back.push(n.blocks_back);
+        }
+        if any_two_sided {
+            let tree = &self.tree;
+            self.elem_two = (tree.elements.iter())
+                .map(|&node| tree.nodes[node as usize].two_sided)
+                .collect();
+            self.back_faces = (0..self.elem_two.len() as u32)
+                .filter(|&e| self.elem_two[e as usize])
+                .collect();
+        }
+    }
+
+    /// Sizes the model within the memory budget: the live bins and (when it fits its own
+    /// budget and what the model leaves) the pair cache, then the estimate of the whole, or
+    /// [`OverBudget`] when it does not fit.
+    fn fit_model(
+        &mut self,
+        patches: &Patches,
+        link_budget: &LinkBudget,
+    ) -> std::result::Result<(), OverBudget> {
+        let options = &self.options;
+        // What the model holds; the stored bins are bounded by every bin until they are known.
+        let n = self.element_count() as u64;
+        let mut counts = ModelCounts {
+            patches: patches.len() as u64,
+            nodes: self.tree.nodes.len() as u64,
+            elements: n,
+            cluster_links: self.links.cluster.len() as u64,
+            exact_pairs: self.links.exact_sender.len() as u64,
+            entries: Some(self.links.exact_entries.len() as u64),
+            slots: Some(if self.use_anti {
+                n * self.bins.len() as u64
+            } else {
+                0
+            }),
+            groups: Some(self.groups.normal.len() as u64),
+        };
+        let costs = &link_budget.costs;
+        let budget = &link_budget.budget;
+        let build_live = |prepared: &Prepared| {
+            if prepared.use_anti {
+                LiveBins::build(prepared)
+            } else {
+                LiveBins::empty(prepared.element_count(), prepared.bins.len())
+            }
+        };
+        // The pair cache, within its own budget and what the model leaves of the memory limit
+        // (with every bin counted; if it does not fit so, the live bins are found first and it
+        // is tried again with the bins the elements store).
+        let own = options.pair_cache_mb as u64 * 1_000_000;
+        let mut cache_dropped = false;
+        match PairCache::build(&*self, own.min(budget.spare(costs.bytes(&counts)))) {
+            Ok(cache) => {
+                self.pairs = Some(cache);
+                self.live = build_live(&*self);
+            }
+            Err(cache_bytes) => {
+                self.live = build_live(&*self);
+                counts.slots = Some(self.live.slots() as u64);
+                if cache_bytes <= own {
+                    let spare = budget.spare(costs.bytes(&counts));
+                    self.pairs = PairCache::build(&*self, own.min(spare)).ok();
+                    cache_dropped = self.pairs.is_none();
+                }
+            }
+        }
+        counts.slots = Some(self.live.slots() as u64);
+        let estimate = costs.bytes(&counts) + self.pairs.as_ref().map_or(0, PairCache::bytes);
+        if !budget.fits(estimate) {
+            return Err(OverBudget { estimate });
+        }
+        self.memory.estimate_bytes = estimate;
+        if cache_dropped {
+            self.memory.coarsened.push("pair cache off".into());
+        }
+        Ok(())
+    }
+}
