@@ -207,6 +207,50 @@ pub(super) struct SweepState<'a, const C: usize> {
 }
 
 impl SweepContext<'_> {
+    /// The exact links into element `e`: adds what they bring to the irradiance of its front
+    /// (`h`) and back face (`h_back`) and to its antiradiance bins (`a_acc`). Returns the
+    /// largest of its two faces' form-factor row sums.
+    fn gather_exact<const C: usize>(
+        &self,
+        e: usize,
+        state: &SweepState<C>,
+        a_acc: &mut [[f64; C]],
+        (h, h_back): (&mut [f64; C], &mut [f64; C]),
+    ) -> f64 {
+        let nb = self.bins.len();
+        let (links, live) = (state.links, self.live);
+        let (radiance, radiance_back, anti) = (state.radiance, state.radiance_back, state.anti);
+        let (use_anti, two_sided, elem_back) = (self.use_anti, self.two_sided, self.elem_back);
+        let (mut row, mut row_back) = (0.0, 0.0);
+        for l in links.exact_start[e]..links.exact_start[e + 1] {
+            let s = links.exact_sender[l as usize] as usize;
+            let (sender_back, receiver_back) = links.exact_faces_of(l as usize);
+            let b_s = if sender_back {
+                radiance_back[s]
+            } else {
+                radiance[s]
+            };
+            let (h, row) = if receiver_back {
+                (&mut *h_back, &mut row_back)
+            } else {
+                (&mut *h, &mut row)
+            };
+            *row += gather_entries(
+                links.exact_entries_of(l as usize),
+                b_s,
+                |bin| {
+                    live.slot(s, bin)
+                        .map_or([0.0; C], |k| anti[k].map(f64::from))
+                },
+                use_anti,
+                two_sided || elem_back[s],
+                h,
+                &mut a_acc[..nb],
+            );
+        }
+        f64::max(row, row_back)
+    }
+
     /// Gathers element `e` (step 3 of a sweep): its exact links, then the cluster links into
     /// it and its ancestors, each with the element's own direction and distance from the
     /// link's sender (the antiradiance goes to the link's bin, the one its sender reads when it
@@ -225,42 +269,14 @@ impl SweepContext<'_> {
         let nb = self.bins.len();
         let (links, live, pairs, intensity) =
             (state.links, self.live, state.pairs, state.intensity);
-        let (radiance, radiance_back, anti) = (state.radiance, state.radiance_back, state.anti);
+        let (radiance, radiance_back) = (state.radiance, state.radiance_back);
         let (emission, emission_back, albedo) =
             (sources.emission, sources.emission_back, sources.albedo);
-        let (use_anti, two_sided) = (self.use_anti, self.two_sided);
-        let (elem_back, elem_two, elem_area) = (self.elem_back, self.elem_two, self.elem_area);
+        let (elem_two, elem_area) = (self.elem_two, self.elem_area);
         a_acc[..nb].fill([0.0; C]);
         let mut h = [0.0f64; C];
         let mut h_back = [0.0f64; C];
-        let (mut row, mut row_back) = (0.0, 0.0);
-        for l in links.exact_start[e]..links.exact_start[e + 1] {
-            let s = links.exact_sender[l as usize] as usize;
-            let (sender_back, receiver_back) = links.exact_faces_of(l as usize);
-            let b_s = if sender_back {
-                radiance_back[s]
-            } else {
-                radiance[s]
-            };
-            let (h, row) = if receiver_back {
-                (&mut h_back, &mut row_back)
-            } else {
-                (&mut h, &mut row)
-            };
-            *row += gather_entries(
-                links.exact_entries_of(l as usize),
-                b_s,
-                |bin| {
-                    live.slot(s, bin)
-                        .map_or([0.0; C], |k| anti[k].map(f64::from))
-                },
-                use_anti,
-                two_sided || elem_back[s],
-                h,
-                &mut a_acc[..nb],
-            );
-        }
-        let row = f64::max(row, row_back);
+        let row = self.gather_exact(e, state, a_acc, (&mut h, &mut h_back));
         let two = elem_two.get(e).copied().unwrap_or(false);
         let mut add = |l: &ClusterLink, i: &[f32; C], k: PairFactor| {
             // Negative: light arriving at a two-sided element's back face.
