@@ -462,55 +462,123 @@ pub fn couple(
     if front.len == 0 && (back.len == 0 || !receiver_back) {
         return;
     }
-    let far = receiver.q == 1 || separation(r, s) > FAR_RATIO;
-    let centroid = [r.centroid];
-    let (points, spread_points): (&[DVec3], &[DVec3]) = if far {
-        (&centroid, &centroid)
-    } else {
-        (&receiver.points, &receiver.spread_points)
-    };
-    // The front parts' solid angles at the spreading points (four at a time when near).
-    let front_parts: SmallVec<[Tri; 2]> = front.triangles().collect();
-    let mut front_omega = [[0.0; geometry::LANES]; 2];
-    for (part, omega) in front_parts.iter().zip(&mut front_omega) {
-        if far {
-            omega[0] = geometry::solid_angle(r.centroid, part);
-        } else {
-            *omega = geometry::solid_angle_lanes(&receiver.spread_lanes, part).to_array();
-        }
-    }
-    let spreads: SmallVec<[Spread; 4]> = spread_points
-        .iter()
-        .enumerate()
-        .map(|(k, &x)| {
-            let omega = [front_omega[0][k], front_omega[1][k]];
-            Spread::new(
-                x,
-                r.normal,
-                (&front_parts, omega),
-                &back,
-                receiver_back,
-                bins,
-                params,
-            )
-        })
-        .collect();
-    let weight = 1.0 / points.len() as f64;
-    // The front part's form factor and solid angle at every point, a group of points at a time.
-    let mut front_seen: SmallVec<[(f64, f64); 36]> = SmallVec::new();
-    if far {
-        front_seen.push(poly_ff_omega(r.centroid, r.normal, &front, true));
-    } else {
-        for group in &receiver.lanes {
-            let (f, w) = geometry::poly_form_factor_solid_angle_lanes(group, r.normal, &front);
-            front_seen.extend(f.to_array().into_iter().zip(w.to_array()));
-        }
-    }
-    let spread_of = |k: usize| if far { 0 } else { receiver.nearest[k] as usize };
-    // The sender's B reaches a receiver point only if the point is in front of it; its
-    // antiradiance leaves through its back (front-only mode) or through either side (two-sided).
-    let facing = |x: DVec3| s.normal.dot(x - s.corners[0]) > 0.0;
+    let seen = Seen::new(receiver, s, (&front, &back), receiver_back, bins, params);
     if receiver_back || sender_both {
+        seen.bin_per_point(s, &back, (receiver_back, sender_both), bins, out);
+    } else {
+        seen.bin_front_only(s, bins, out);
+    }
+}
+
+/// What the points of one coupling's receiver see of the sender: the points (the centroid alone
+/// when far), how each spreading point splits the sender over bins, and the front part's form
+/// factor and solid angle at every point.
+struct Seen<'a> {
+    receiver: &'a Receiver,
+    far: bool,
+    points: &'a [DVec3],
+    spreads: SmallVec<[Spread; 4]>,
+    front_seen: SmallVec<[(f64, f64); 36]>,
+    weight: f64,
+}
+
+impl<'a> Seen<'a> {
+    /// What `receiver`'s points see of sender `s`, clipped by the receiver's plane into `front`
+    /// and `back` parts (the back part's bins only when `receiver_back`).
+    fn new(
+        receiver: &'a Receiver,
+        s: &PatchGeom,
+        (front, back): (&Poly, &Poly),
+        receiver_back: bool,
+        bins: &Bins,
+        params: &CouplingParams,
+    ) -> Seen<'a> {
+        let r = &receiver.geom;
+        let far = receiver.q == 1 || separation(r, s) > FAR_RATIO;
+        let (points, spread_points): (&[DVec3], &[DVec3]) = if far {
+            (
+                std::slice::from_ref(&r.centroid),
+                std::slice::from_ref(&r.centroid),
+            )
+        } else {
+            (&receiver.points, &receiver.spread_points)
+        };
+        // The front parts' solid angles at the spreading points (four at a time when near).
+        let front_parts: SmallVec<[Tri; 2]> = front.triangles().collect();
+        let mut front_omega = [[0.0; geometry::LANES]; 2];
+        for (part, omega) in front_parts.iter().zip(&mut front_omega) {
+            if far {
+                omega[0] = geometry::solid_angle(r.centroid, part);
+            } else {
+                *omega = geometry::solid_angle_lanes(&receiver.spread_lanes, part).to_array();
+            }
+        }
+        let spreads: SmallVec<[Spread; 4]> = spread_points
+            .iter()
+            .enumerate()
+            .map(|(k, &x)| {
+                let omega = [front_omega[0][k], front_omega[1][k]];
+                Spread::new(
+                    x,
+                    r.normal,
+                    (&front_parts, omega),
+                    back,
+                    receiver_back,
+                    bins,
+                    params,
+                )
+            })
+            .collect();
+        let weight = 1.0 / points.len() as f64;
+        // The front part's form factor and solid angle at every point, a group of points at a time.
+        let mut front_seen: SmallVec<[(f64, f64); 36]> = SmallVec::new();
+        if far {
+            front_seen.push(poly_ff_omega(r.centroid, r.normal, front, true));
+        } else {
+            for group in &receiver.lanes {
+                let (f, w) = geometry::poly_form_factor_solid_angle_lanes(group, r.normal, front);
+                front_seen.extend(f.to_array().into_iter().zip(w.to_array()));
+            }
+        }
+        Seen {
+            receiver,
+            far,
+            points,
+            spreads,
+            front_seen,
+            weight,
+        }
+    }
+
+    /// The spreading point of receiver point `k`.
+    fn spread_of(&self, k: usize) -> usize {
+        if self.far {
+            0
+        } else {
+            self.receiver.nearest[k] as usize
+        }
+    }
+
+    /// The entries, point by point: each point's front and (`receiver_back`) back parts'
+    /// shares of each bin, its antiradiance weights counted where the sender's antiradiance
+    /// reaches it (behind the sender, or anywhere when `sender_both`).
+    fn bin_per_point(
+        &self,
+        s: &PatchGeom,
+        back: &Poly,
+        (receiver_back, sender_both): (bool, bool),
+        bins: &Bins,
+        out: &mut Coupling,
+    ) {
+        let (r, points, spreads, front_seen, weight) = (
+            &self.receiver.geom,
+            self.points,
+            &self.spreads,
+            &self.front_seen,
+            self.weight,
+        );
+        let spread_of = |k: usize| self.spread_of(k);
+        let facing = |x: DVec3| s.normal.dot(x - s.corners[0]) > 0.0;
         // Per point: the front and back parts' shares of each bin.
         let mut acc = PointBins::new();
         for (k, &x) in points.iter().enumerate() {
@@ -521,7 +589,7 @@ pub fn couple(
                 add_point_bin(&mut acc, bin, f_front * f_frac, w_front * w_frac);
             }
             if receiver_back {
-                let (_, w_back) = poly_ff_omega(x, r.normal, &back, false);
+                let (_, w_back) = poly_ff_omega(x, r.normal, back, false);
                 for &(bin, _, w_frac) in &spread.back {
                     add_point_bin(&mut acc, bin, 0.0, w_back * w_frac);
                 }
@@ -540,54 +608,61 @@ pub fn couple(
                 }
             }
         }
-        return;
     }
-    // Front-only: the points sharing a spreading point and a side of the sender differ only by
-    // their form factor and solid angle, so those are summed first; a bin's share of a point's
-    // solid angle is capped at the bin's, which the largest point shows whether it binds.
-    #[derive(Clone, Copy, Default)]
-    struct Side {
-        f: f64,
-        w: f64,
-        w_max: f64,
-        points: u32,
-    }
-    let mut sides = [[Side::default(); 2]; 4];
-    // Each point's (spreading point, side), for the points where the cap binds.
-    let mut side_of: SmallVec<[(usize, usize); 36]> = SmallVec::new();
-    for (k, &x) in points.iter().enumerate() {
-        let key = (spread_of(k), usize::from(facing(x)));
-        side_of.push(key);
-        let side = &mut sides[key.0][key.1];
-        let (f, w) = front_seen[k];
-        side.f += f;
-        side.w += w;
-        side.w_max = side.w_max.max(w);
-        side.points += 1;
-    }
-    for (g, spread) in spreads.iter().enumerate() {
-        for (in_front, side) in sides[g].iter().enumerate() {
-            if side.points == 0 {
-                continue;
-            }
-            for &(bin, f_frac, w_frac) in &spread.front {
-                let omega_bin = bins.solid_angle[bin as usize];
-                let o = if side.w_max * w_frac <= omega_bin {
-                    side.w * w_frac / omega_bin
-                } else {
-                    (0..points.len())
-                        .filter(|&k| side_of[k] == (g, in_front))
-                        .map(|k| bin_share(front_seen[k].1 * w_frac, omega_bin))
-                        .sum()
-                };
-                let (f, o) = ((side.f * f_frac * weight) as f32, (o * weight) as f32);
-                let entry = entry_of(out, bin);
-                if in_front == 1 {
-                    entry.f_b += f;
-                    entry.o_b += o;
-                } else {
-                    entry.f_a += f;
-                    entry.o_a += o;
+
+    /// The entries when neither side takes antiradiance from behind: the points sharing a
+    /// spreading point and a side of the sender differ only by their form factor and solid
+    /// angle, so those are summed first; a bin's share of a point's solid angle is capped at
+    /// the bin's, which the largest point shows whether it binds.
+    fn bin_front_only(&self, s: &PatchGeom, bins: &Bins, out: &mut Coupling) {
+        let (points, spreads, front_seen, weight) =
+            (self.points, &self.spreads, &self.front_seen, self.weight);
+        let spread_of = |k: usize| self.spread_of(k);
+        let facing = |x: DVec3| s.normal.dot(x - s.corners[0]) > 0.0;
+        #[derive(Clone, Copy, Default)]
+        struct Side {
+            f: f64,
+            w: f64,
+            w_max: f64,
+            points: u32,
+        }
+        let mut sides = [[Side::default(); 2]; 4];
+        // Each point's (spreading point, side), for the points where the cap binds.
+        let mut side_of: SmallVec<[(usize, usize); 36]> = SmallVec::new();
+        for (k, &x) in points.iter().enumerate() {
+            let key = (spread_of(k), usize::from(facing(x)));
+            side_of.push(key);
+            let side = &mut sides[key.0][key.1];
+            let (f, w) = front_seen[k];
+            side.f += f;
+            side.w += w;
+            side.w_max = side.w_max.max(w);
+            side.points += 1;
+        }
+        for (g, spread) in spreads.iter().enumerate() {
+            for (in_front, side) in sides[g].iter().enumerate() {
+                if side.points == 0 {
+                    continue;
+                }
+                for &(bin, f_frac, w_frac) in &spread.front {
+                    let omega_bin = bins.solid_angle[bin as usize];
+                    let o = if side.w_max * w_frac <= omega_bin {
+                        side.w * w_frac / omega_bin
+                    } else {
+                        (0..points.len())
+                            .filter(|&k| side_of[k] == (g, in_front))
+                            .map(|k| bin_share(front_seen[k].1 * w_frac, omega_bin))
+                            .sum()
+                    };
+                    let (f, o) = ((side.f * f_frac * weight) as f32, (o * weight) as f32);
+                    let entry = entry_of(out, bin);
+                    if in_front == 1 {
+                        entry.f_b += f;
+                        entry.o_b += o;
+                    } else {
+                        entry.f_a += f;
+                        entry.o_a += o;
+                    }
                 }
             }
         }
