@@ -46,6 +46,83 @@ pub(super) enum GroupInput {
     Element(u32),
 }
 
+/// The nodes `large` selects, in post-order (children before parents) from the root; a node
+/// that is not large ends its branch.
+fn large_post_order(tree: &ClusterTree, large: &dyn Fn(u32) -> bool) -> Vec<u32> {
+    let mut order = Vec::new();
+    let mut stack = vec![(0u32, false)];
+    while let Some((i, done)) = stack.pop() {
+        if !large(i) {
+            continue;
+        }
+        if done {
+            order.push(i);
+        } else {
+            stack.push((i, true));
+            let node = &tree.nodes[i as usize];
+            for c in node.first_child..node.first_child + node.child_count as u32 {
+                stack.push((c, false));
+            }
+        }
+    }
+    order
+}
+
+/// The group of each input (by normal and whether it blocks at its back): exact groups when
+/// every input has a unit normal and there are at most [`MAX_EXACT_GROUPS`] distinct ones, else
+/// cells of the coarse direction grid `cells`. Returns each input's group, each group's
+/// "blocks at its back", and whether the groups are exact.
+fn group_keys(
+    inputs: &[(GroupInput, DVec3, f64)],
+    input_back: &[bool],
+    cells: &Bins,
+) -> (Vec<usize>, Vec<bool>, bool) {
+    // Exact groups when every input has a unit normal and there are few distinct ones;
+    // else cells of a coarse direction grid.
+    let mut distinct: Vec<(DVec3, bool)> = Vec::new();
+    let mut key_of: Vec<usize> = Vec::with_capacity(inputs.len());
+    let mut exact = true;
+    for ((_, n, _), &back) in inputs.iter().zip(input_back) {
+        if (n.length_squared() - 1.0).abs() > UNIT_NORMAL_SLACK {
+            exact = false;
+            break;
+        }
+        match distinct
+            .iter()
+            .position(|(d, b)| *b == back && 1.0 - d.dot(*n) <= SAME_NORMAL)
+        {
+            Some(k) => key_of.push(k),
+            None if distinct.len() < MAX_EXACT_GROUPS => {
+                key_of.push(distinct.len());
+                distinct.push((*n, back));
+            }
+            None => {
+                exact = false;
+                break;
+            }
+        }
+    }
+    let mut group_back: Vec<bool> = distinct.iter().map(|&(_, b)| b).collect();
+    if !exact {
+        key_of.clear();
+        group_back.clear();
+        let mut cell_keys: Vec<(usize, bool)> = Vec::new();
+        for ((_, n, _), &back) in inputs.iter().zip(input_back) {
+            let cell = (cells.bin_of(*n), back);
+            let k = cell_keys
+                .iter()
+                .position(|&c| c == cell)
+                .unwrap_or_else(|| {
+                    cell_keys.push(cell);
+                    group_back.push(back);
+                    cell_keys.len() - 1
+                });
+            key_of.push(k);
+        }
+    }
+    (key_of, group_back, exact)
+}
+
 impl SenderGroups {
     /// Builds the groups of every large node of a finalized tree.
     pub(super) fn build(
@@ -67,22 +144,7 @@ impl SenderGroups {
             let (e0, e1) = tree.nodes[i as usize].elements;
             e1 - e0 > PULL_PER_ELEMENT_MAX
         };
-        // Post-order over the large nodes.
-        let mut stack = vec![(0u32, false)];
-        while let Some((i, done)) = stack.pop() {
-            if !large(i) {
-                continue;
-            }
-            if done {
-                groups.order.push(i);
-            } else {
-                stack.push((i, true));
-                let node = &tree.nodes[i as usize];
-                for c in node.first_child..node.first_child + node.child_count as u32 {
-                    stack.push((c, false));
-                }
-            }
-        }
+        groups.order = large_post_order(tree, &large);
         let cells = Bins::new(GROUP_CELLS);
         let order = std::mem::take(&mut groups.order);
         for &i in &order {
@@ -107,52 +169,8 @@ impl SenderGroups {
                     }
                 }
             }
-            // Exact groups when every input has a unit normal and there are few distinct ones;
-            // else cells of a coarse direction grid.
-            let mut distinct: Vec<(DVec3, bool)> = Vec::new();
-            let mut key_of: Vec<usize> = Vec::with_capacity(inputs.len());
-            let mut exact = true;
-            for ((_, n, _), &back) in inputs.iter().zip(&input_back) {
-                if (n.length_squared() - 1.0).abs() > UNIT_NORMAL_SLACK {
-                    exact = false;
-                    break;
-                }
-                match distinct
-                    .iter()
-                    .position(|(d, b)| *b == back && 1.0 - d.dot(*n) <= SAME_NORMAL)
-                {
-                    Some(k) => key_of.push(k),
-                    None if distinct.len() < MAX_EXACT_GROUPS => {
-                        key_of.push(distinct.len());
-                        distinct.push((*n, back));
-                    }
-                    None => {
-                        exact = false;
-                        break;
-                    }
-                }
-            }
-            let mut group_back: Vec<bool> = distinct.iter().map(|&(_, b)| b).collect();
-            let count = if exact {
-                distinct.len()
-            } else {
-                key_of.clear();
-                group_back.clear();
-                let mut cell_keys: Vec<(usize, bool)> = Vec::new();
-                for ((_, n, _), &back) in inputs.iter().zip(&input_back) {
-                    let cell = (cells.bin_of(*n), back);
-                    let k = cell_keys
-                        .iter()
-                        .position(|&c| c == cell)
-                        .unwrap_or_else(|| {
-                            cell_keys.push(cell);
-                            group_back.push(back);
-                            cell_keys.len() - 1
-                        });
-                    key_of.push(k);
-                }
-                cell_keys.len()
-            };
+            let (key_of, group_back, exact) = group_keys(&inputs, &input_back, &cells);
+            let count = group_back.len();
             groups.both.extend_from_slice(&group_back);
             let first = groups.normal.len() as u32;
             groups.range[i as usize] = (first, first + count as u32);
