@@ -52,9 +52,18 @@ pub fn solve_dense(
         // The oracle solves two-sided patches as the back-to-back pairs of one-sided patches
         // they are equivalent to (each pair's faces cover each other's backs).
         let (expanded, back_of) = patches.with_back_faces();
-        let solution = solve_dense(&expanded, options, progress)?;
+        let solution = solve_one_sided(&expanded, options, progress)?;
         return Ok(solution.fold_back_faces(patches, &back_of));
     }
+    solve_one_sided(patches, options, progress)
+}
+
+/// [`solve_dense`] of patches that are all one-sided.
+fn solve_one_sided(
+    patches: &Patches,
+    options: &SolverOptions,
+    progress: &Progress,
+) -> Result<Solution> {
     let bins = Bins::new(options.bins);
     let nb = bins.len();
     let n = patches.len();
