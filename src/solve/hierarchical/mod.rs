@@ -351,16 +351,7 @@ impl Prepared {
     /// The elements, in the order of [`ElementState`] (the front faces of
     /// [`Prepared::faces`]).
     pub fn elements(&self) -> impl ExactSizeIterator<Item = Element> + '_ {
-        self.tree
-            .elements
-            .iter()
-            .enumerate()
-            .map(|(e, &node)| Element {
-                corners: self.tree.nodes[node as usize].corners,
-                normal: self.elem_normal[e],
-                area: self.elem_area[e],
-                patch: self.elem_patch[e],
-            })
+        (0..self.element_count()).map(|e| self.element(e))
     }
 
     /// Solves with the patches' own emission.
