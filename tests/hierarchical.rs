@@ -159,14 +159,19 @@ fn default_settings_agree_with_dense() {
     }
 }
 
-/// The report's per-sweep work counts what a sweep evaluates: every cluster link into an
-/// element or an ancestor, once per element below its receiver, so at least one pair per
-/// cluster link; and as many pull terms as cluster links at least (a sender has one element or
-/// normal group or more).
+/// The report's per-sweep work counts what a sweep evaluates: without receiver fields, every
+/// cluster link into an element or an ancestor, once per element below its receiver, so at
+/// least one pair per cluster link; and as many pull terms as cluster links at least (a sender
+/// has one element or normal group or more). With fields (the default), fewer pairs, and the
+/// links and evaluations of the fields.
 #[test]
 fn sweep_work_counts_every_element_below_each_receiver() {
     let patches = build_patches(&generated::cornell_box(), Some(150.0));
-    let prepared = Prepared::new(&patches, &SolverOptions::default(), false).unwrap();
+    let options = SolverOptions {
+        field_ratio: 0.0,
+        ..SolverOptions::default()
+    };
+    let prepared = Prepared::new(&patches, &options, false).unwrap();
     let (tree, links) = (&prepared.tree, &prepared.links);
     let below: u64 = links
         .cluster
@@ -180,10 +185,19 @@ fn sweep_work_counts_every_element_below_each_receiver() {
     assert_eq!(pairs, below);
     assert!(pairs > links.cluster.len() as u64, "{pairs} pairs");
     assert!(pull >= links.cluster.len() as u64, "{pull} pull terms");
-    let solution =
-        solve_hierarchical(&patches, &SolverOptions::default(), &Progress::hidden()).unwrap();
+    let solution = solve_hierarchical(&patches, &options, &Progress::hidden()).unwrap();
     assert_eq!(solution.stats.element_link_pairs, pairs);
     assert_eq!(solution.stats.pull_terms, pull);
+    assert_eq!(solution.stats.field_links, 0);
+    let fielded =
+        solve_hierarchical(&patches, &SolverOptions::default(), &Progress::hidden()).unwrap();
+    assert!(fielded.stats.field_links > 0);
+    assert!(fielded.stats.field_evaluations > 0);
+    assert!(
+        fielded.stats.element_link_pairs < pairs,
+        "{} of {pairs}",
+        fielded.stats.element_link_pairs
+    );
 }
 
 /// The report says how the sweeps were accelerated, and why Anderson mixing was off when it
@@ -204,4 +218,33 @@ fn report_names_the_acceleration_used() {
     );
     // Both reach the same fixed point.
     assert!(error(&patches, &off, &on) < 0.01);
+}
+
+/// Receiver fields (links gathered once at their receiver node, to first order over it) give
+/// the per-element gather's answer: on the subdivided Cornell box and on the occluder scene,
+/// one-sided and two-sided, the default `field_ratio` against 0 (every link per element), per
+/// patch within 0.6%, while gathering links through fields.
+#[test]
+fn receiver_fields_agree_with_the_per_element_gather() {
+    for (name, scene, max_edge) in [
+        ("cornell", generated::subdivided_cornell_box(4_000), None),
+        ("occluder", generated::occluder_scene(), Some(0.05)),
+    ] {
+        let patches = build_patches(&scene, max_edge);
+        for two_sided in [false, true] {
+            let fielded = SolverOptions {
+                two_sided,
+                ..SolverOptions::default()
+            };
+            let per_element = SolverOptions {
+                field_ratio: 0.0,
+                ..fielded.clone()
+            };
+            let a = solve_hierarchical(&patches, &fielded, &Progress::hidden()).unwrap();
+            let b = solve_hierarchical(&patches, &per_element, &Progress::hidden()).unwrap();
+            assert!(a.stats.field_links > 0, "{name}: no field links");
+            let e = error(&patches, &a, &b);
+            assert!(e < 0.006, "{name} two-sided {two_sided}: {:.3}%", 100.0 * e);
+        }
+    }
 }

@@ -118,6 +118,11 @@ pub struct SolverArgs {
     /// be kept (0 refines by geometry alone); default 1e-5.
     #[arg(long, value_name = "S", allow_negative_numbers = true)]
     pub flux_share: Option<f64>,
+    /// Largest receiver extent over its distance from the sender for which a cluster link is
+    /// gathered once at the receiver node, as its field to first order (0 gathers every link
+    /// at every element); default 0.2.
+    #[arg(long, value_name = "R", allow_negative_numbers = true)]
+    pub field_ratio: Option<f64>,
     /// Stop when the estimated remaining relative error of B is under T.
     #[arg(long, value_name = "T", allow_negative_numbers = true)]
     pub tol: Option<f64>,
@@ -180,6 +185,9 @@ impl SolverArgs {
         }
         if let Some(share) = self.flux_share {
             options.flux_share = share;
+        }
+        if let Some(ratio) = self.field_ratio {
+            options.field_ratio = ratio;
         }
         if let Some(tol) = self.tol {
             options.tol = tol;

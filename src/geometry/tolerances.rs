@@ -75,6 +75,13 @@ pub const TREE_CHECK_ABSOLUTE: f64 = 1e-12;
 /// (dimensionless; about 4.5e-5 radians): equal up to rounding, so groups are exact.
 pub const SAME_NORMAL: f64 = 1e-9;
 
+/// Receiver fields ([`crate::solve::SolverOptions::field_ratio`]) merge two normals of a
+/// receiver's elements into one plane slab when 1 - cos of their angle is at most this
+/// (dimensionless; about 1e-3 radians), and widen the side test by the angle times the
+/// distance: merging keeps the slabs few on meshes whose coplanar faces carry rounding or a
+/// 1e-6 jitter, the margin keeps the test conservative.
+pub const FIELD_NORMAL_MERGE: f64 = 5e-7;
+
 /// A normal is taken as unit when its squared length is within this of 1 (dimensionless);
 /// normals that are not (degenerate corners) send the groups to the coarse direction grid.
 pub const UNIT_NORMAL_SLACK: f64 = 1e-9;

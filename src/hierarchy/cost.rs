@@ -63,6 +63,11 @@ impl HierarchicalCosts {
         }
     }
 
+    /// Colour channels of the sweep state.
+    pub fn channels(&self) -> u64 {
+        self.channels
+    }
+
     /// Estimated peak bytes of a hierarchical solve with these counts, without the optional
     /// pair cache and acceleration history: the larger of the peak of link refinement (tree,
     /// cluster-link keys becoming links, exact couplings and their assembly) and the peak of

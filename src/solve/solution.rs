@@ -73,8 +73,15 @@ pub struct SolveStats {
     /// the dense solver's active patches; 0 for the path tracer.
     pub elements: usize,
     /// Per sweep of the hierarchical solver: (element, cluster link) pairs its gather evaluates,
-    /// every cluster link into an element or one of its ancestors; 0 for the other solvers.
+    /// every cluster link into an element or one of its ancestors that is not gathered through
+    /// its receiver's field ([`crate::solve::SolverOptions::field_ratio`]); 0 for the other solvers.
     pub element_link_pairs: u64,
+    /// Cluster links of the hierarchical solver gathered through their receiver's field
+    /// (summed once per sweep at the receiver node); 0 for the other solvers.
+    pub field_links: u64,
+    /// Per sweep of the hierarchical solver: (element, receiver field) evaluations, every
+    /// field of an element's node or one of its ancestors; 0 for the other solvers.
+    pub field_evaluations: u64,
     /// Per sweep of the hierarchical solver: the terms its pull sums, a cluster link's sender
     /// elements (or normal groups, for a grouped sender) over every cluster link; 0 for the
     /// other solvers.

@@ -27,6 +27,7 @@ struct Scratch<const C: usize> {
     group_b_back: Vec<[f64; C]>,
     group_a: Vec<[f64; C]>,
     intensity: Vec<[f32; C]>,
+    field_sums: FieldSums<C>,
 }
 
 impl Prepared {
@@ -106,6 +107,7 @@ impl Prepared {
             group_b_back: vec![[0.0f64; C]; if backs > 0 { groups.normal.len() } else { 0 }],
             group_a: vec![[0.0f64; C]; groups.normal.len() * nb],
             intensity: std::mem::take(&mut intensity),
+            field_sums: FieldSums::new(&self.fields),
         };
         let sources = Sources {
             emission: &emission,
@@ -446,6 +448,7 @@ impl Prepared {
             group_b_back,
             group_a,
             intensity,
+            field_sums,
         } = scratch;
         // 1. Sender summaries: per normal group of every large node, the area-weighted sums of
         //    B and of each antiradiance bin (bottom-up, children before parents).
@@ -474,6 +477,9 @@ impl Prepared {
                 );
             });
 
+        // 2b. Fields: the links gathered at their receiver node, summed once per node.
+        ctx.sum_fields(&self.fields, links, intensity, field_sums);
+
         // 3. Gather per element: exact links, then the cluster links into it and its ancestors,
         //    each with the element's own direction and distance from the link's sender (the
         //    antiradiance goes to the link's bin, the one its sender reads when it passes it on).
@@ -491,6 +497,7 @@ impl Prepared {
             radiance,
             radiance_back,
             anti,
+            field_sums,
         };
         let change_parts: Vec<SweepSums> = next_radiance
             .par_iter_mut()
@@ -558,6 +565,7 @@ impl Prepared {
         });
         stats.elements = n;
         (stats.element_link_pairs, stats.pull_terms) = self.sweep_work();
+        (stats.field_links, stats.field_evaluations) = (self.fields.links, self.fields.evaluations);
         memory.peak_bytes = crate::memory::peak_rss_bytes();
         stats.memory = Some(memory);
         // The result is checked against the bound of this solve's source (with exact direct

@@ -86,6 +86,9 @@ impl LiveBins {
                         }
                     }),
                 }
+                // The links gathered through fields on its path.
+                let back = ctx.two_sided || prepared.elem_back[e];
+                prepared.fields.written_bins(e, back, |bin| set(m, bin));
                 let mut reads = r.to_vec();
                 let mut node = tree.elements[e];
                 while node != NONE {

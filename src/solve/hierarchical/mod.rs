@@ -10,6 +10,7 @@
 //!    couplings of its element links (the same [`crate::transport::couple`] as the dense solver);
 //! 3. every element forms `B = E + rho H` and its new antiradiance bins.
 
+mod fields;
 mod groups;
 mod iterate;
 mod live_bins;
@@ -17,6 +18,7 @@ mod pair_cache;
 mod prepare;
 mod sweep;
 
+use fields::*;
 use groups::*;
 use live_bins::*;
 use pair_cache::*;
@@ -74,6 +76,8 @@ pub struct Prepared {
     groups: SenderGroups,
     /// The antiradiance bins each element stores.
     live: LiveBins,
+    /// Which cluster links are gathered through their receiver's field ([`Fields`]).
+    fields: Fields,
     /// Cached geometric factors of the (element, cluster link) pairs, when they fit the budget.
     pairs: Option<PairCache>,
     /// What one sweep evaluates ([`Prepared::sweep_work`]).
@@ -269,7 +273,7 @@ impl Prepared {
         let (tree, links) = (&self.tree, &self.links);
         let pairs = (0..self.element_count())
             .into_par_iter()
-            .map(|e| links_into_ancestors(tree, links, e) as u64)
+            .map(|e| near_links_into_ancestors(tree, links, &self.fields, e) as u64)
             .sum();
         let pull = links
             .cluster
@@ -302,6 +306,8 @@ impl Prepared {
             + n * (8 + 24 + 24 + 24 + 4)
             + self.live.bytes()
             + self.pairs.as_ref().map_or(0, PairCache::bytes)
+            + self.fields.bytes()
+            + self.fields.sweep_bytes(3)
             + self.links.cluster.len() as u64 * 12
             + self.groups.bytes(nb)
     }
@@ -500,6 +506,7 @@ impl Prepared {
             elem_center: &self.elem_center,
             elem_back: &self.elem_back,
             elem_two: &self.elem_two,
+            fields: &self.fields,
             use_anti: self.use_anti,
             two_sided: self.options.two_sided,
         }
@@ -581,14 +588,18 @@ pub fn solve_hierarchical(
     Ok(prepared.solve(patches, progress).0)
 }
 
-/// Cluster links into element `e` and into each of its ancestors: the (element, link) pairs
-/// of `e` in a sweep's gather.
-fn links_into_ancestors(tree: &ClusterTree, links: &Links, e: usize) -> usize {
+/// Cluster links into element `e` and into each of its ancestors that are gathered per
+/// element (not through a field): the (element, link) pairs of `e` in a sweep's gather.
+fn near_links_into_ancestors(
+    tree: &ClusterTree,
+    links: &Links,
+    fields: &Fields,
+    e: usize,
+) -> usize {
     let mut total = 0;
     let mut node = tree.elements[e];
     while node != NONE {
-        total +=
-            (links.cluster_start[node as usize + 1] - links.cluster_start[node as usize]) as usize;
+        total += (fields.near_end[node as usize] - links.cluster_start[node as usize]) as usize;
         node = tree.nodes[node as usize].parent;
     }
     total

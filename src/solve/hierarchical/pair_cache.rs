@@ -40,7 +40,7 @@ impl PairCache {
         let n = prepared.element_count();
         let counts: Vec<usize> = (0..n)
             .into_par_iter()
-            .map(|e| links_into_ancestors(tree, links, e))
+            .map(|e| near_links_into_ancestors(tree, links, &prepared.fields, e))
             .collect();
         let total: usize = counts.iter().sum();
         let bytes = (total * std::mem::size_of::<[f32; 2]>() + (n + 1) * 8) as u64;
@@ -73,7 +73,7 @@ impl PairCache {
             while node != NONE {
                 let (a, b) = (
                     links.cluster_start[node as usize],
-                    links.cluster_start[node as usize + 1],
+                    prepared.fields.near_end[node as usize],
                 );
                 if b > a {
                     ranges.push((a, b));

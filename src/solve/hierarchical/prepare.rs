@@ -122,6 +122,7 @@ impl Prepared {
             back_blocking_patches: back_blocking.iter().filter(|&&b| b).count() as u64,
             groups: SenderGroups::default(),
             live: LiveBins::default(),
+            fields: Fields::default(),
             pairs: None,
             work: (0, 0),
             albedo_grey: true,
@@ -142,6 +143,7 @@ impl Prepared {
             },
         };
         prepared.fill_elements(patches, two_sided.iter().any(|&b| b));
+        prepared.fields = Fields::build(&mut prepared, options.field_ratio);
         prepared.groups = SenderGroups::build(
             &prepared.tree,
             &prepared.elem_area,
@@ -238,7 +240,12 @@ impl Prepared {
             }
         }
         counts.slots = Some(self.live.slots() as u64);
-        let estimate = costs.bytes(&counts) + self.pairs.as_ref().map_or(0, PairCache::bytes);
+        let estimate = costs.bytes(&counts)
+            + self.pairs.as_ref().map_or(0, PairCache::bytes)
+            + self.fields.bytes()
+            + self
+                .fields
+                .sweep_bytes(link_budget.costs.channels() as usize);
         if !budget.fits(estimate) {
             return Err(OverBudget { estimate });
         }

@@ -51,13 +51,16 @@ pub(super) struct SweepContext<'a> {
     pub(super) elem_back: &'a [bool],
     /// Per element: two-sided (its back face gathers too); empty when none is.
     pub(super) elem_two: &'a [bool],
+    /// Which links are gathered through their receiver's field (the rest per element).
+    pub(super) fields: &'a Fields,
     pub(super) use_anti: bool,
     pub(super) two_sided: bool,
 }
 
 impl SweepContext<'_> {
-    /// Calls `f` with the index of every cluster link into element `e` or one of its ancestors (element
-    /// first, then up the tree; links of a node in stored order) and the pair's factors.
+    /// Calls `f` with the index of every cluster link into element `e` or one of its ancestors
+    /// that is gathered per element (element first, then up the tree; the near links of a node
+    /// in stored order, [`Fields::near_end`]) and the pair's factors.
     #[inline]
     pub(super) fn for_each_pair(
         &self,
@@ -71,7 +74,7 @@ impl SweepContext<'_> {
         let mut node = self.tree.elements[e];
         while node != NONE {
             let range = links.cluster_start[node as usize] as usize
-                ..links.cluster_start[node as usize + 1] as usize;
+                ..self.fields.near_end[node as usize] as usize;
             for (i, l) in range.clone().zip(&links.cluster[range]) {
                 f(i, l, self.pair_factor(l, n_e, x_e, back, two));
             }
@@ -204,6 +207,8 @@ pub(super) struct SweepState<'a, const C: usize> {
     pub(super) radiance: &'a [[f64; C]],
     pub(super) radiance_back: &'a [[f64; C]],
     pub(super) anti: &'a [[f32; C]],
+    /// This sweep's field sums (from `intensity`).
+    pub(super) field_sums: &'a FieldSums<C>,
 }
 
 impl SweepContext<'_> {
@@ -356,6 +361,12 @@ impl SweepContext<'_> {
             }
             None => ctx.for_each_pair(e, links, |i, l, k| add(l, &intensity[i], k)),
         }
+        self.gather_fields(
+            e,
+            (self.fields, state.field_sums),
+            a_acc,
+            (&mut h, &mut h_back),
+        );
         let mut largest = 0.0f64;
         let mut finite = true;
         let a = elem_area[e];
