@@ -223,7 +223,8 @@ fn report_names_the_acceleration_used() {
 /// Receiver fields (links gathered once at their receiver node, to first order over it) give
 /// the per-element gather's answer: on the subdivided Cornell box and on the occluder scene,
 /// one-sided and two-sided, the default `field_ratio` against 0 (every link per element), per
-/// patch within 0.6%, while gathering links through fields.
+/// patch within 0.3% (measured: 0.10% and 0.19%; a first-order expansion gave 0.52% and
+/// 0.79% at a smaller ratio), while gathering links through fields.
 #[test]
 fn receiver_fields_agree_with_the_per_element_gather() {
     for (name, scene, max_edge) in [
@@ -244,7 +245,7 @@ fn receiver_fields_agree_with_the_per_element_gather() {
             let b = solve_hierarchical(&patches, &per_element, &Progress::hidden()).unwrap();
             assert!(a.stats.field_links > 0, "{name}: no field links");
             let e = error(&patches, &a, &b);
-            assert!(e < 0.006, "{name} two-sided {two_sided}: {:.3}%", 100.0 * e);
+            assert!(e < 0.003, "{name} two-sided {two_sided}: {:.3}%", 100.0 * e);
         }
     }
 }

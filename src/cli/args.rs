@@ -119,8 +119,8 @@ pub struct SolverArgs {
     #[arg(long, value_name = "S", allow_negative_numbers = true)]
     pub flux_share: Option<f64>,
     /// Largest receiver extent over its distance from the sender for which a cluster link is
-    /// gathered once at the receiver node, as its field to first order (0 gathers every link
-    /// at every element); default 0.2.
+    /// gathered once at the receiver node, as its field to second order (0 gathers every link
+    /// at every element); default 0.3.
     #[arg(long, value_name = "R", allow_negative_numbers = true)]
     pub field_ratio: Option<f64>,
     /// Stop when the estimated remaining relative error of B is under T.

@@ -48,9 +48,9 @@ pub struct SolverOptions {
     /// Receiver fields of the hierarchical solver ([`crate::solve::hierarchical`]): a cluster
     /// link whose receiver's extent is at most this times its distance from the sender (and
     /// whose sender lies on one side of every element below the receiver) is gathered once per
-    /// sweep at the receiver node, as its field to first order over the node, instead of at
-    /// every element below. The remainder is about `3 ratio^2` of the link's value at the
-    /// node's edge. 0 gathers every link per element; 0..0.5; 0.2 by default.
+    /// sweep at the receiver node, as its field to second order over the node, instead of at
+    /// every element below. The remainder is about `4 ratio^3` of the link's value at the
+    /// node's edge. 0 gathers every link per element; 0..0.5; 0.3 by default.
     pub field_ratio: f64,
     /// Exact direct light: the first bounce from the emitters with shadow rays, antiradiance for
     /// the indirect bounces only (see [`crate::solve::direct`]). On in the `default` and `accurate`
@@ -107,7 +107,7 @@ impl SolverOptions {
             epsilon: LinkParams::DEFAULT.epsilon,
             split_depth: LinkParams::DEFAULT.max_split_depth,
             flux_share: LinkParams::DEFAULT.flux_share,
-            field_ratio: 0.2,
+            field_ratio: 0.3,
             direct_light: true,
             pair_cache_mb: 1024,
             acceleration_depth: 4,
