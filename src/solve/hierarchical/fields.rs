@@ -8,9 +8,9 @@
 //! links cost plus the elements times the fields on their path. A link qualifies when
 //!
 //! - its receiver has at least [`MIN_FIELD_ELEMENTS`] elements;
-//! - every element below it of one normal sees the link's sender on the same side (the
-//!   receiver's normals are merged into at most [`MAX_SLABS`] slabs, each a normal or a cell
-//!   of normals, and each slab must be wholly in front or wholly behind): within a side the
+//! - every element below it in one slab sees the link's sender on the same side (the
+//!   receiver's elements are put in at most [`MAX_SLABS`] slabs: planes, else normals, else
+//!   cells of normals, and each slab must be wholly in front or wholly behind): within a side the
 //!   irradiance factor `max(0, cos) / (pi (d^2 + spread))` is the linear function
 //!   `n_e . G(x_e)` of the normal, with no clamp to break the expansion, and the link's mask
 //!   says which slabs see it in front;
@@ -240,9 +240,9 @@ impl Fields {
             .into_par_iter()
             .enumerate()
             .for_each(|(e, out)| {
-                let normal = prepared.elem_normal[e];
+                let (normal, x) = (prepared.elem_normal[e], prepared.elem_center[e]);
                 for (k, f) in out.iter_mut().zip(self.path(e)) {
-                    *k = views[f].slab_of(normal, &cells);
+                    *k = views[f].slab_of(normal, x, &cells);
                 }
             });
         self.elem_slab = slab;
@@ -331,13 +331,23 @@ impl Fields {
 struct ReceiverView {
     /// Largest distance of an element's centroid below the node from the node's centroid.
     extent: f64,
-    /// The elements' normals in at most [`MAX_SLABS`] slabs: normals merged within
-    /// [`FIELD_NORMAL_MERGE`] (each element in the first slab whose normal is that close to
-    /// its own), or when there are more, the cells of a direction grid (`grid`). Each slab:
-    /// its axis, the largest distance of a normal in it from the axis, and the range of
-    /// `axis . centroid` over its elements (empty: `lo > hi`).
+    /// The elements in at most [`MAX_SLABS`] slabs: planes (normals within
+    /// [`FIELD_NORMAL_MERGE`], offsets within the plane tolerance of the slab's range; each
+    /// element in the first slab it fits), or when there are more, the cells of a direction
+    /// grid by normal alone (`grid`). Each slab: its axis, the largest distance of a normal in
+    /// it from the axis, and the range of `axis . centroid` over its elements (empty:
+    /// `lo > hi`). A plane is never on both sides of a sender; a slab of parallel planes is
+    /// when the sender lies between them.
     slabs: smallvec::SmallVec<[Slab; MAX_SLABS]>,
-    grid: bool,
+    mode: SlabMode,
+}
+
+/// How a [`ReceiverView`] puts its elements in slabs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum SlabMode {
+    Planes,
+    Normals,
+    Grid,
 }
 
 /// One slab of a [`ReceiverView`].
@@ -350,14 +360,20 @@ struct Slab {
 }
 
 impl ReceiverView {
-    /// The slab of an element with normal `n`.
-    fn slab_of(&self, n: DVec3, cells: &Bins) -> u8 {
-        if self.grid {
+    /// The slab of an element with normal `n` and centroid `x`: its direction cell, or the
+    /// first plane slab of its normal whose range holds it (the one the element was put in, or
+    /// an earlier one that grew over it: either bounds the element).
+    fn slab_of(&self, n: DVec3, x: DVec3, cells: &Bins) -> u8 {
+        if self.mode == SlabMode::Grid {
             return cells.bin_of(n) as u8;
         }
         self.slabs
             .iter()
-            .position(|s| 1.0 - s.axis.dot(n) <= FIELD_NORMAL_MERGE)
+            .position(|s| {
+                let h = s.axis.dot(x);
+                1.0 - s.axis.dot(n) <= FIELD_NORMAL_MERGE
+                    && (self.mode == SlabMode::Normals || (s.lo <= h && h <= s.hi))
+            })
             .unwrap_or(0) as u8
     }
 }
@@ -386,46 +402,31 @@ impl Prepared {
         keys
     }
 
-    /// The extent and normal slabs of node `i`'s elements (`cells`: the direction grid).
+    /// The extent and slabs of node `i`'s elements (`cells`: the direction grid): planes when
+    /// there are at most [`MAX_SLABS`], else normals, else direction cells.
     fn receiver_view(&self, i: usize, cells: &Bins) -> ReceiverView {
         let node = &self.tree.nodes[i];
         let elements = node.elements.0 as usize..node.elements.1 as usize;
-        let merged = (2.0 * FIELD_NORMAL_MERGE).sqrt();
-        let mut view = ReceiverView {
-            extent: 0.0,
-            slabs: smallvec::SmallVec::new(),
-            grid: false,
-        };
-        for e in elements.clone() {
-            let (n, x) = (self.elem_normal[e], self.elem_center[e]);
-            view.extent = view.extent.max((x - node.centroid).length());
-            if view.grid {
-                continue;
-            }
-            let slabs = &mut view.slabs;
-            match slabs
-                .iter()
-                .position(|s| 1.0 - s.axis.dot(n) <= FIELD_NORMAL_MERGE)
-            {
-                Some(k) => {
-                    let slab = &mut slabs[k];
-                    let h = slab.axis.dot(x);
-                    slab.lo = slab.lo.min(h);
-                    slab.hi = slab.hi.max(h);
-                }
-                None if slabs.len() < MAX_SLABS => {
-                    let h = n.dot(x);
-                    slabs.push(Slab {
-                        axis: n,
-                        deviation: merged,
-                        lo: h,
-                        hi: h,
-                    });
-                }
-                None => view.grid = true,
+        let extent = elements
+            .clone()
+            .map(|e| (self.elem_center[e] - node.centroid).length())
+            .fold(0.0, f64::max);
+        let tol = crate::geometry::plane_tol(node.radius);
+        for mode in [SlabMode::Planes, SlabMode::Normals] {
+            if let Some(slabs) = self.exact_slabs(elements.clone(), mode, tol) {
+                return ReceiverView {
+                    extent,
+                    slabs,
+                    mode,
+                };
             }
         }
-        if view.grid {
+        let mut view = ReceiverView {
+            extent,
+            slabs: smallvec::SmallVec::new(),
+            mode: SlabMode::Grid,
+        };
+        {
             // One slab per cell: its mean normal as the axis.
             let empty = Slab {
                 axis: DVec3::ZERO,
@@ -451,6 +452,47 @@ impl Prepared {
             view.slabs = slabs.into_iter().collect();
         }
         view
+    }
+
+    /// The slabs of `elements` by plane (normal and offset) or by normal alone, or `None`
+    /// when there are more than [`MAX_SLABS`].
+    fn exact_slabs(
+        &self,
+        elements: std::ops::Range<usize>,
+        mode: SlabMode,
+        tol: f64,
+    ) -> Option<smallvec::SmallVec<[Slab; MAX_SLABS]>> {
+        let mut slabs: smallvec::SmallVec<[Slab; MAX_SLABS]> = smallvec::SmallVec::new();
+        for e in elements {
+            let (n, x) = (self.elem_normal[e], self.elem_center[e]);
+            let fits = |s: &Slab| {
+                let h = s.axis.dot(x);
+                1.0 - s.axis.dot(n) <= FIELD_NORMAL_MERGE
+                    && (mode == SlabMode::Normals || (s.lo - tol <= h && h <= s.hi + tol))
+            };
+            match slabs.iter().position(fits) {
+                Some(k) => {
+                    let slab = &mut slabs[k];
+                    let h = slab.axis.dot(x);
+                    slab.lo = slab.lo.min(h);
+                    slab.hi = slab.hi.max(h);
+                    // The normals' own distance from the axis (at most sqrt(2 x merge)),
+                    // with a little for its rounding.
+                    slab.deviation = slab.deviation.max((n - slab.axis).length() + 1e-12);
+                }
+                None if slabs.len() < MAX_SLABS => {
+                    let h = n.dot(x);
+                    slabs.push(Slab {
+                        axis: n,
+                        deviation: 1e-12,
+                        lo: h,
+                        hi: h,
+                    });
+                }
+                None => return None,
+            }
+        }
+        Some(slabs)
     }
 
     /// The key of cluster link `l` when it can be gathered through its receiver's field
@@ -500,6 +542,12 @@ impl Prepared {
             // axis's.
             let margin = tol + slab.deviation * (d + view.extent);
             let h = slab.axis.dot(p);
+            // A sender in the slab's plane (within the margin of its whole range) lights its
+            // elements at grazing incidence: nothing, as behind them (the per-element gather's
+            // cosine is then 0 up to rounding).
+            if (h - slab.lo).abs() <= margin && (h - slab.hi).abs() <= margin {
+                continue;
+            }
             if side(h - slab.hi, h - slab.lo, margin)? {
                 mask |= 1 << k;
             }
