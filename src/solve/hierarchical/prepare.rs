@@ -240,6 +240,7 @@ impl Prepared {
             }
         }
         counts.slots = Some(self.live.slots() as u64);
+        self.fields.keep_live(&self.tree, &self.live);
         let estimate = costs.bytes(&counts)
             + self.pairs.as_ref().map_or(0, PairCache::bytes)
             + self.fields.bytes()

@@ -1,0 +1,333 @@
+//! Receiver fields: the cluster links into a node whose receiver is small seen from the
+//! sender are gathered once per sweep at the node, as the field they make over it to second
+//! order (value, gradient and second derivatives at the node's centroid), and each element
+//! below evaluates the fields of its ancestors instead of every link into them.
+//!
+//! The per-element gather of a link costs its receiver's element count; a field costs one
+//! term per link and one evaluation per (element, ancestor field), so a sweep costs what the
+//! links cost plus the elements times the fields on their path. A link qualifies when
+//!
+//! - its receiver has at least [`MIN_FIELD_ELEMENTS`] elements;
+//! - every element below it in one slab sees the link's sender on the same side (the
+//!   receiver's elements are put in at most [`MAX_SLABS`] slabs: planes, else normals, else
+//!   cells of normals, and each slab must be wholly in front or wholly behind): within a side the
+//!   irradiance factor `max(0, cos) / (pi (d^2 + spread))` is the linear function
+//!   `n_e . G(x_e)` of the normal, with no clamp to break the expansion, and the link's mask
+//!   says which slabs see it in front;
+//! - the receiver's extent (largest distance of an element's centroid from the node's
+//!   centroid) is at most [`SolverOptions::field_ratio`] times the distance from the sender
+//!   (with the sender's spread): the expansion's third-order remainder is then about
+//!   `4 ratio^3` of the link's value at the edge of the node.
+//!
+//! Everything else is gathered per element (the near field). On the seed room the fields
+//! change the result by 0.009% (per-element gather of every link: `field_ratio` 0).
+
+use super::*;
+
+/// Nodes with fewer elements gather every link per element.
+pub(super) const MIN_FIELD_ELEMENTS: u32 = 2;
+
+/// A field link's key: the receiver slabs that see its sender in front (a bit mask) above
+/// `MASK_SHIFT`, its bin below; [`NEAR`] for a link gathered per element.
+const MASK_SHIFT: u32 = 16;
+const NEAR: u32 = u32::MAX;
+
+mod slabs;
+mod sums;
+
+use slabs::*;
+pub(super) use sums::FieldSums;
+use sums::{ANTI_TERMS, IRR_TERMS};
+
+/// The receiver fields of a prepared scene: which links are gathered at their receiver node
+/// and where their sums go.
+///
+/// A field's links are sorted by key (slab mask, then bin). A run of one mask is an
+/// irradiance group (one `G` and Jacobian, which each element below adds to its front when
+/// its slab is in the mask, else to its back face when it has one); a run of one key is an
+/// antiradiance slot (one value and gradient, added to the slot's bin by the elements of the
+/// mask's slabs and by those that create antiradiance from their back).
+#[derive(Clone, Debug, Default)]
+pub(super) struct Fields {
+    /// Per node, the end of its near links: `links.cluster[cluster_start[i] .. near_end[i]]`
+    /// are gathered per element, `near_end[i] .. cluster_start[i + 1]` through node i's field.
+    pub(super) near_end: Vec<u32>,
+    /// Per field: its node.
+    pub(super) node: Vec<u32>,
+    /// Per field: the expansion centre (the node's area-weighted centroid).
+    pub(super) center: Vec<DVec3>,
+    /// Per field: the nearest field of an ancestor, [`NONE`] when none.
+    pub(super) parent: Vec<u32>,
+    /// Per field: its irradiance groups `group_start[f] .. group_start[f + 1]`.
+    pub(super) group_start: Vec<u32>,
+    /// Per group: its slab mask.
+    pub(super) group_mask: Vec<u16>,
+    /// Per group: its slots `group_slots[g] .. group_slots[g + 1]`.
+    pub(super) group_slots: Vec<u32>,
+    /// Per field: its slots `slot_start[f] .. slot_start[f + 1]`.
+    pub(super) slot_start: Vec<u32>,
+    /// Per slot: its key (mask and bin).
+    pub(super) slot_key: Vec<u32>,
+    /// Per slot: the end of its links in `links.cluster` (they start where the previous slot's
+    /// end, or at the node's `near_end`).
+    pub(super) slot_end: Vec<u32>,
+    /// Per slot: the index of its antiradiance sums, [`NONE`] when no element below the
+    /// field stores its bin (its antiradiance would be dropped); see [`Fields::keep_live`].
+    pub(super) slot_sum: Vec<u32>,
+    /// Slots with antiradiance sums.
+    pub(super) live_slots: usize,
+    /// Per field: its first antiradiance sum (the sums of a field's slots are contiguous).
+    pub(super) sum_start: Vec<u32>,
+    /// Per element: its own or its nearest ancestor's field, [`NONE`] when none.
+    pub(super) of_element: Vec<u32>,
+    /// Per element, for each field on its path in order: its slab in that field's node
+    /// (`elem_slab[elem_slab_start[e] ..]`).
+    pub(super) elem_slab: Vec<u8>,
+    pub(super) elem_slab_start: Vec<u32>,
+    /// Links gathered through fields.
+    pub(super) links: u64,
+    /// (element, field) evaluations per sweep.
+    pub(super) evaluations: u64,
+}
+
+impl Fields {
+    /// No fields: every link of `links` is gathered per element.
+    pub(super) fn none(links: &Links, elements: usize) -> Fields {
+        Fields {
+            near_end: links.cluster_start[1..].to_vec(),
+            of_element: vec![NONE; elements],
+            elem_slab_start: vec![0; elements + 1],
+            ..Fields::default()
+        }
+    }
+
+    /// Sorts every node's links into near ones (first, in their order) and field ones (after,
+    /// by key), and lays out the fields, for receivers of at most `ratio` times their distance
+    /// from the sender (0: no fields). Reorders `links.cluster` within each node.
+    pub(super) fn build(prepared: &mut Prepared, ratio: f64) -> Fields {
+        let n = prepared.element_count();
+        if !(ratio > 0.0) || prepared.links.cluster.is_empty() {
+            return Fields::none(&prepared.links, n);
+        }
+        let nodes = prepared.tree.nodes.len();
+        let keys = prepared.field_keys(ratio);
+        let links = &mut prepared.links;
+        let mut keyed: Vec<(u32, ClusterLink)> =
+            keys.into_iter().zip(links.cluster.drain(..)).collect();
+        split_by_start(&mut keyed, &links.cluster_start)
+            .into_par_iter()
+            .for_each(|part| part.sort_by_key(|&(k, l)| (k != NEAR, k, l.sender)));
+        let mut fields = Fields {
+            near_end: Vec::with_capacity(nodes),
+            ..Fields::default()
+        };
+        let mut field_of = vec![NONE; nodes];
+        for i in 0..nodes {
+            let (a, b) = (
+                links.cluster_start[i] as usize,
+                links.cluster_start[i + 1] as usize,
+            );
+            let near = keyed[a..b].iter().take_while(|(k, _)| *k == NEAR).count();
+            fields.near_end.push((a + near) as u32);
+            if a + near < b {
+                field_of[i] = fields.node.len() as u32;
+                fields.add_field(
+                    i,
+                    prepared.tree.nodes[i].centroid,
+                    &keyed[a + near..b],
+                    a + near,
+                );
+            }
+        }
+        fields.slot_start.push(fields.slot_key.len() as u32);
+        fields.group_start.push(fields.group_mask.len() as u32);
+        fields.group_slots.push(fields.slot_key.len() as u32);
+        fields.slot_sum = (0..fields.slot_key.len() as u32).collect();
+        fields.live_slots = fields.slot_key.len();
+        fields.sum_start = fields.slot_start.clone();
+        links.cluster = keyed.into_iter().map(|(_, l)| l).collect();
+        fields.link_tree(&prepared.tree, &field_of);
+        fields.assign_slabs(prepared);
+        fields
+    }
+
+    /// Appends the field of node `i` (centre `center`), whose links, sorted by key, are
+    /// `keyed`, starting at `first` in `links.cluster`: its groups and slots.
+    fn add_field(&mut self, i: usize, center: DVec3, keyed: &[(u32, ClusterLink)], first: usize) {
+        self.node.push(i as u32);
+        self.center.push(center);
+        self.slot_start.push(self.slot_key.len() as u32);
+        self.group_start.push(self.group_mask.len() as u32);
+        for (j, &(k, _)) in keyed.iter().enumerate() {
+            let end = (first + j + 1) as u32;
+            if j > 0 && self.slot_key.last() == Some(&k) {
+                *self.slot_end.last_mut().expect("pushed") = end;
+                continue;
+            }
+            let mask = (k >> MASK_SHIFT) as u16;
+            if j == 0 || self.group_mask.last() != Some(&mask) {
+                self.group_mask.push(mask);
+                self.group_slots.push(self.slot_key.len() as u32);
+            }
+            self.slot_key.push(k);
+            self.slot_end.push(end);
+        }
+        self.links += keyed.len() as u64;
+    }
+
+    /// Each field's nearest field ancestor and each element's nearest field, top-down from
+    /// the root (`field_of`: per node, its field or [`NONE`]).
+    fn link_tree(&mut self, tree: &ClusterTree, field_of: &[u32]) {
+        let mut nearest = vec![NONE; tree.nodes.len()];
+        let mut stack = vec![(0u32, NONE)];
+        self.parent = vec![NONE; self.node.len()];
+        while let Some((i, above)) = stack.pop() {
+            let f = field_of[i as usize];
+            if f != NONE {
+                self.parent[f as usize] = above;
+            }
+            let here = if f != NONE { f } else { above };
+            nearest[i as usize] = here;
+            let node = &tree.nodes[i as usize];
+            for c in node.first_child..node.first_child + node.child_count as u32 {
+                stack.push((c, here));
+            }
+        }
+        self.of_element = tree.elements.iter().map(|&i| nearest[i as usize]).collect();
+    }
+
+    /// Every element's slab in each field on its path (the slabs of
+    /// [`Prepared::receiver_view`], found again by the element's normal).
+    fn assign_slabs(&mut self, prepared: &Prepared) {
+        let n = prepared.element_count();
+        let cells = Bins::new(SLAB_CELLS);
+        let views: Vec<ReceiverView> = self
+            .node
+            .par_iter()
+            .map(|&i| prepared.receiver_view(i as usize, &cells))
+            .collect();
+        let counts: Vec<u32> = (0..n)
+            .into_par_iter()
+            .map(|e| self.path(e).count() as u32)
+            .collect();
+        let mut start = Vec::with_capacity(n + 1);
+        start.push(0u32);
+        for c in &counts {
+            start.push(start.last().expect("pushed") + c);
+        }
+        self.evaluations = *start.last().expect("pushed") as u64;
+        let mut slab = vec![0u8; self.evaluations as usize];
+        split_by_start(&mut slab, &start)
+            .into_par_iter()
+            .enumerate()
+            .for_each(|(e, out)| {
+                let (normal, x) = (prepared.elem_normal[e], prepared.elem_center[e]);
+                for (k, f) in out.iter_mut().zip(self.path(e)) {
+                    *k = views[f].slab_of(normal, x, &cells);
+                }
+            });
+        self.elem_slab = slab;
+        self.elem_slab_start = start;
+    }
+
+    /// The fields element `e` evaluates, each with the element's slab in it: its own node's
+    /// or nearest ancestor's first, then up the tree.
+    pub(super) fn path_slabs(&self, e: usize) -> impl Iterator<Item = (usize, u8)> + '_ {
+        let slabs = self
+            .elem_slab
+            .get(self.elem_slab_start[e] as usize..self.elem_slab_start[e + 1] as usize)
+            .unwrap_or(&[]);
+        self.path(e).zip(slabs.iter().copied())
+    }
+
+    /// The fields element `e` evaluates: its own node's or nearest ancestor's, then up.
+    fn path(&self, e: usize) -> impl Iterator<Item = usize> + '_ {
+        let mut f = self.of_element.get(e).copied().unwrap_or(NONE);
+        std::iter::from_fn(move || {
+            if f == NONE {
+                return None;
+            }
+            let here = f as usize;
+            f = self.parent[here];
+            Some(here)
+        })
+    }
+
+    /// The links of slot `s` of field `f`.
+    fn slot_links(&self, f: usize, s: usize) -> std::ops::Range<usize> {
+        let start = if s == self.slot_start[f] as usize {
+            self.near_end[self.node[f] as usize] as usize
+        } else {
+            self.slot_end[s - 1] as usize
+        };
+        start..self.slot_end[s] as usize
+    }
+
+    /// A slot's bin and slab mask.
+    fn slot_bin(&self, s: usize) -> (usize, u16) {
+        let k = self.slot_key[s];
+        (
+            (k & ((1 << MASK_SHIFT) - 1)) as usize,
+            (k >> MASK_SHIFT) as u16,
+        )
+    }
+
+    /// Bytes held (without the per-sweep sums, [`Fields::sweep_bytes`]).
+    pub(super) fn bytes(&self) -> u64 {
+        (self.near_end.len() * 4
+            + self.node.len() * (4 + 24 + 4 + 4 + 4)
+            + self.group_mask.len() * (2 + 4)
+            + self.slot_key.len() * (4 + 4 + 4)
+            + self.of_element.len() * 8
+            + self.elem_slab.len()) as u64
+    }
+
+    /// Bytes of the per-sweep sums in `channels` channels.
+    pub(super) fn sweep_bytes(&self, channels: usize) -> u64 {
+        ((self.group_mask.len() * IRR_TERMS + self.live_slots * ANTI_TERMS) * channels * 4) as u64
+    }
+
+    /// Keeps antiradiance sums only for the slots whose bin some element below their field
+    /// stores (`live`); every slot keeps them until this is called. On the 1M-triangle
+    /// box most slots' bins are stored nowhere below them.
+    pub(super) fn keep_live(&mut self, tree: &ClusterTree, live: &LiveBins) {
+        let words = live.words;
+        let mut next = 0u32;
+        self.sum_start.clear();
+        for f in 0..self.node.len() {
+            self.sum_start.push(next);
+            let node = &tree.nodes[self.node[f] as usize];
+            let mut union = vec![0u64; words];
+            for e in node.elements.0 as usize..node.elements.1 as usize {
+                for (u, m) in union.iter_mut().zip(&live.mask[e * words..(e + 1) * words]) {
+                    *u |= m;
+                }
+            }
+            for s in self.slot_start[f] as usize..self.slot_start[f + 1] as usize {
+                let (bin, _) = self.slot_bin(s);
+                self.slot_sum[s] = if (union[bin >> 6] >> (bin & 63)) & 1 != 0 {
+                    next += 1;
+                    next - 1
+                } else {
+                    NONE
+                };
+            }
+        }
+        self.sum_start.push(next);
+        self.live_slots = next as usize;
+    }
+
+    /// Calls `set` with the bin of every field slot on element `e`'s path that gives it
+    /// antiradiance: those whose mask holds its slab, and every one when it creates
+    /// antiradiance from its back (`back`).
+    pub(super) fn written_bins(&self, e: usize, back: bool, mut set: impl FnMut(usize)) {
+        for (f, k) in self.path_slabs(e) {
+            for s in self.slot_start[f] as usize..self.slot_start[f + 1] as usize {
+                let (bin, mask) = self.slot_bin(s);
+                if back || mask & (1 << k) != 0 {
+                    set(bin);
+                }
+            }
+        }
+    }
+}
