@@ -356,18 +356,30 @@ impl<'a> DirectLight<'a> {
 
     /// True when no light of `group` can reach the receiver's front: the group lies wholly
     /// behind the receiver's plane, or the receiver wholly behind the group's (one-sided
-    /// emitters). A cheap, conservative test (bounding sphere, plane margins).
+    /// emitters), or the receiver lies behind or in the plane of every member within the
+    /// tolerance [`Self::emitter_form_factor`] uses (a ceiling around a light made of many
+    /// triangles: each member's form factor would be 0, found member by member). A cheap,
+    /// conservative test (bounding sphere, plane margins).
     fn cannot_reach(&self, r: &Element, receiver: &PatchGeom, group: &EmitterGroup) -> bool {
         let tol = plane_tol(receiver.size.max(2.0 * group.radius));
         if r.normal.dot(group.center - r.corners[0]) <= tol - group.radius {
             return true;
         }
-        r.corners.iter().all(|&c| {
-            let margin = group.normal_spread * ((c - group.center).length() + group.radius)
-                + group.thickness
-                + tol;
-            group.normal.dot(c - group.centroid) <= -margin
-        })
+        // How far a member's plane can be from the group's at corner c.
+        let spread = |c: DVec3| {
+            group.normal_spread * ((c - group.center).length() + group.radius) + group.thickness
+        };
+        if r.corners
+            .iter()
+            .all(|&c| group.normal.dot(c - group.centroid) <= -(spread(c) + tol))
+        {
+            return true;
+        }
+        // Every member's own test (`emitter_form_factor`) uses at least this tolerance.
+        let member_tol = plane_tol(receiver.size) * (1.0 - 1e-9);
+        r.corners
+            .iter()
+            .all(|&c| group.normal.dot(c - group.centroid) + spread(c) <= member_tol)
     }
 
     /// True when every vertex of `group` lies in the closed half-space in front of the
