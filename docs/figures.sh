@@ -12,15 +12,15 @@
 #   MESHES        the folder of the seed meshes (default ../shared/meshes); rows that need a
 #                 mesh that is not there are skipped with a message
 #   RUNS          runs per timed command (default 5; the tables quote min / median / max)
-#   PARTS         which parts, in order (default "room accuracy growth memory bench relight
-#                 mesh_quality")
+#   PARTS         which parts, in order (default "room accuracy growth fields memory bench
+#                 relight mesh_quality")
 # Uses only the binary, cargo, bash and coreutils.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 B=${ANTIRADIANCE:-target/release/antiradiance}
 MESHES=${MESHES:-../shared/meshes}
 RUNS=${RUNS:-5}
-PARTS=${PARTS:-room accuracy growth memory bench relight mesh_quality}
+PARTS=${PARTS:-room accuracy growth fields memory bench relight mesh_quality}
 OUT=${1:-figures}
 mkdir -p "$OUT"
 ROOM=$MESHES/room_radiosity_small.obj
@@ -100,6 +100,28 @@ relight() {
   "$B" relight "$ROOM" "${ROOM_OPTS[@]}" --preset fast --frames 8 --out "$OUT/frames_fast" --quiet --report "$OUT/relight_fast.json"
   "$B" relight "$ROOM" "${ROOM_OPTS[@]}" --frames 8 --bands 8 --out "$OUT/frames_bands" --quiet --report "$OUT/relight_bands.json"
   cargo bench --bench relight > "$OUT/bench_relight.log" 2>&1
+}
+
+# performance.md, "Receiver fields": each scene with fields (the default) and without
+# (--field-ratio 0, the per-element gather), alternated, RUNS runs each.
+fields() {
+  "$B" scene cornell-box --triangles 256000 --out "$OUT/fields_cb256k.obj" --quiet
+  "$B" scene classroom --out "$OUT/fields_classroom.obj" --quiet
+  local scenes=("$OUT/fields_cb256k.obj" "$OUT/fields_classroom.obj")
+  if have "$ROOM"; then scenes=("$ROOM" "${scenes[@]}"); fi
+  for scene in "${scenes[@]}"; do
+    local name opts=()
+    name=$(basename "$scene" .obj)
+    [ "$scene" = "$ROOM" ] && opts=("${ROOM_OPTS[@]}")
+    for i in $(seq "$RUNS"); do
+      for ratio in 0.3 0; do
+        "$B" solve "$scene" "${opts[@]}" --field-ratio "$ratio" --quiet \
+          --report "$OUT/fields_${name}_${ratio}_$i.json" --triangles "$OUT/fields_${name}_${ratio}_$i.csv"
+      done
+    done
+  done
+  "$B" scene cornell-box --triangles 1000000 --out "$OUT/fields_cb1m.obj" --quiet
+  "$B" solve "$OUT/fields_cb1m.obj" --quiet --report "$OUT/fields_cb1m.json"
 }
 
 # docs/mesh_quality.md.
