@@ -315,50 +315,7 @@ impl SweepContext<'_> {
                     );
                 }
             }),
-            Some(cache) => {
-                // A stream of multiply-adds: factors, intensities and bins
-                // side by side (a factor of 0 adds nothing), alternate pairs
-                // into two sets of sums so that consecutive adds into one bin
-                // do not wait on each other.
-                let (a_even, a_odd) = a_acc.split_at_mut(nb);
-                let mut h_odd = [0.0f64; C];
-                cache.for_each_node(e, |range, factors| {
-                    let intensity = &intensity[range.clone()];
-                    let bins = &cache.link_bin[range];
-                    let pairs = factors.len() / 2;
-                    for k in 0..pairs {
-                        let (j0, j1) = (2 * k, 2 * k + 1);
-                        let [f0, g0] = factors[j0].map(f64::from);
-                        let [f1, g1] = factors[j1].map(f64::from);
-                        let (i0, i1) = (intensity[j0].map(f64::from), intensity[j1].map(f64::from));
-                        let (b0, b1) = (bins[j0] as usize, bins[j1] as usize);
-                        for c in 0..C {
-                            h[c] += f0 * i0[c];
-                            h_odd[c] += f1 * i1[c];
-                            a_even[b0][c] += g0 * i0[c];
-                            a_odd[b1][c] += g1 * i1[c];
-                        }
-                    }
-                    if factors.len() % 2 == 1 {
-                        let j = factors.len() - 1;
-                        let [f0, g0] = factors[j].map(f64::from);
-                        let (i0, b0) = (intensity[j].map(f64::from), bins[j] as usize);
-                        for c in 0..C {
-                            h[c] += f0 * i0[c];
-                            a_even[b0][c] += g0 * i0[c];
-                        }
-                    }
-                });
-                for c in 0..C {
-                    h[c] += h_odd[c];
-                }
-                for (even, odd) in a_even.iter_mut().zip(a_odd.iter_mut()) {
-                    for c in 0..C {
-                        even[c] += odd[c];
-                    }
-                    *odd = [0.0; C];
-                }
-            }
+            Some(cache) => stream_cached(cache, e, intensity, nb, a_acc, &mut h),
             None => ctx.for_each_pair(e, links, |i, l, k| add(l, &intensity[i], k)),
         }
         self.gather_fields(
@@ -400,6 +357,62 @@ impl SweepContext<'_> {
             largest,
             finite,
         }
+    }
+}
+
+/// The cached (element, cluster link) pairs of element `e` (step 3 of a sweep, with a pair
+/// cache): adds each link's intensity times its factors to the irradiance `h` and to the
+/// link's bin of `a_acc` (twice the bins of scratch; the second half is left zeroed).
+#[allow(clippy::needless_range_loop)]
+fn stream_cached<const C: usize>(
+    cache: &PairCache,
+    e: usize,
+    intensity: &[[f32; C]],
+    nb: usize,
+    a_acc: &mut [[f64; C]],
+    h: &mut [f64; C],
+) {
+    // A stream of multiply-adds: factors, intensities and bins
+    // side by side (a factor of 0 adds nothing), alternate pairs
+    // into two sets of sums so that consecutive adds into one bin
+    // do not wait on each other.
+    let (a_even, a_odd) = a_acc.split_at_mut(nb);
+    let mut h_odd = [0.0f64; C];
+    cache.for_each_node(e, |range, factors| {
+        let intensity = &intensity[range.clone()];
+        let bins = &cache.link_bin[range];
+        let pairs = factors.len() / 2;
+        for k in 0..pairs {
+            let (j0, j1) = (2 * k, 2 * k + 1);
+            let [f0, g0] = factors[j0].map(f64::from);
+            let [f1, g1] = factors[j1].map(f64::from);
+            let (i0, i1) = (intensity[j0].map(f64::from), intensity[j1].map(f64::from));
+            let (b0, b1) = (bins[j0] as usize, bins[j1] as usize);
+            for c in 0..C {
+                h[c] += f0 * i0[c];
+                h_odd[c] += f1 * i1[c];
+                a_even[b0][c] += g0 * i0[c];
+                a_odd[b1][c] += g1 * i1[c];
+            }
+        }
+        if factors.len() % 2 == 1 {
+            let j = factors.len() - 1;
+            let [f0, g0] = factors[j].map(f64::from);
+            let (i0, b0) = (intensity[j].map(f64::from), bins[j] as usize);
+            for c in 0..C {
+                h[c] += f0 * i0[c];
+                a_even[b0][c] += g0 * i0[c];
+            }
+        }
+    });
+    for c in 0..C {
+        h[c] += h_odd[c];
+    }
+    for (even, odd) in a_even.iter_mut().zip(a_odd.iter_mut()) {
+        for c in 0..C {
+            even[c] += odd[c];
+        }
+        *odd = [0.0; C];
     }
 }
 
