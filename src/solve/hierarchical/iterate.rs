@@ -30,6 +30,55 @@ struct Scratch<const C: usize> {
     field_sums: FieldSums<C>,
 }
 
+impl<const C: usize> Scratch<C> {
+    /// Zeroed sums for the sender groups, the back faces' groups (when some element is
+    /// two-sided), every bin of the groups and the fields of `prepared`, with the links'
+    /// `intensity` array.
+    fn new(prepared: &Prepared, intensity: Vec<[f32; C]>) -> Self {
+        let groups = prepared.groups.normal.len();
+        let backs = !prepared.elem_two.is_empty();
+        Scratch {
+            group_b: vec![[0.0f64; C]; groups],
+            group_b_back: vec![[0.0f64; C]; if backs { groups } else { 0 }],
+            group_a: vec![[0.0f64; C]; groups * prepared.bins.len()],
+            intensity,
+            field_sums: FieldSums::new(&prepared.fields),
+        }
+    }
+}
+
+/// Going on from `resume`: Anderson's history when it has the state's length
+/// (`going_on.1`), and, when going on with the same source (`going_on.0`), its convergence
+/// estimate, health guard and counts. Returns the first sweep's number and the history.
+fn resumed<const C: usize>(
+    resume: Option<Resume>,
+    (same_source, state_len): (bool, usize),
+    (convergence, guard, stats): (&mut Convergence, &mut Guard, &mut SolveStats),
+) -> (usize, Option<Anderson>) {
+    let Some(r) = resume else {
+        return (1, None);
+    };
+    let kept = r.anderson.filter(|a| a.len() == state_len);
+    if !same_source {
+        return (1, kept);
+    }
+    *convergence = r.convergence;
+    *guard = r.guard;
+    stats.max_row_sum = r.max_row_sum;
+    stats.extrapolations = r.extrapolations;
+    stats.damped_after = r.damped_after;
+    (r.sweeps + 1, kept)
+}
+
+/// Out of time: the next sweep, as long as the one started at `sweep_start`, would end after
+/// the deadline.
+fn out_of_time(deadline: Option<Instant>, sweep_start: Instant) -> bool {
+    deadline.is_some_and(|deadline| {
+        let now = Instant::now();
+        now + (now - sweep_start) > deadline
+    })
+}
+
 impl Prepared {
     /// [`Prepared::solve_from`] in `C` colour channels (1 or 3).
     #[allow(clippy::too_many_arguments)]
@@ -44,7 +93,6 @@ impl Prepared {
     ) -> (Solution, ElementState) {
         let t0 = Instant::now();
         let options = &self.options;
-        let nb = self.bins.len();
         let n = self.element_count();
         let live = &self.live;
         let slots = live.slots();
@@ -74,22 +122,11 @@ impl Prepared {
         convergence.warm = matched && same_source_len;
         let (bound, mut guard, rho_max) =
             self.health_start(patches, (&emission, &emission_back), &albedo);
-        // Going on with the same source: its convergence estimate, health checks and counts.
-        let mut first = 1;
-        let mut kept_anderson = None;
-        if let Some(r) = resume {
-            kept_anderson = r
-                .anderson
-                .filter(|a| a.len() == state_len_of::<C>(n + backs, slots));
-            if going_on {
-                convergence = r.convergence;
-                guard = r.guard;
-                first = r.sweeps + 1;
-                stats.max_row_sum = r.max_row_sum;
-                stats.extrapolations = r.extrapolations;
-                stats.damped_after = r.damped_after;
-            }
-        }
+        let (first, kept_anderson) = resumed::<C>(
+            resume,
+            (going_on, state_len_of::<C>(n + backs, slots)),
+            (&mut convergence, &mut guard, &mut stats),
+        );
         let mut memory = self.memory.clone();
         let (mut anderson, acceleration) =
             self.acceleration::<C>(kept_anderson, going_on, &mut memory);
@@ -101,14 +138,7 @@ impl Prepared {
             }
         }
         let (mut x_flat, mut g_flat) = (Vec::new(), Vec::new());
-        let groups = &self.groups;
-        let mut scratch = Scratch {
-            group_b: vec![[0.0f64; C]; groups.normal.len()],
-            group_b_back: vec![[0.0f64; C]; if backs > 0 { groups.normal.len() } else { 0 }],
-            group_a: vec![[0.0f64; C]; groups.normal.len() * nb],
-            intensity: std::mem::take(&mut intensity),
-            field_sums: FieldSums::new(&self.fields),
-        };
+        let mut scratch = Scratch::new(self, std::mem::take(&mut intensity));
         let sources = Sources {
             emission: &emission,
             emission_back: &emission_back,
@@ -151,30 +181,16 @@ impl Prepared {
                     acc.restart();
                 }
             }
-            damp_if_damped(
-                &guard,
-                (&mut radiance, &next_radiance),
-                (&mut anti, &next_anti),
-            );
-            if guard.damped() {
-                crate::solve::health::damp(&mut radiance_back, &next_radiance_back);
-            }
-            if self.mix_step(
-                anderson.as_mut(),
-                &mut convergence,
+            if self.settle_sweep(
+                (&guard, anderson.as_mut(), &mut convergence),
                 (&mut radiance, &mut radiance_back, &mut anti),
                 (&next_radiance, &next_radiance_back, &next_anti),
                 (&mut x_flat, &mut g_flat),
             ) {
                 stats.extrapolations += 1;
             }
-            // Out of time when the next sweep, as long as this one, would end after the
-            // deadline.
-            if let Some(deadline) = deadline {
-                let now = Instant::now();
-                if now + (now - sweep_start) > deadline {
-                    break;
-                }
+            if out_of_time(deadline, sweep_start) {
+                break;
             }
         }
         stats.iterations = last + 1 - first;
@@ -187,6 +203,34 @@ impl Prepared {
             (radiance, radiance_back, anti),
             (stats, memory, bound),
             (anderson, convergence, guard, last),
+        )
+    }
+
+    /// The state the next sweep starts from, after a sweep that did not end the solve:
+    /// damped towards the sweep's output when the guard damps, then mixed by
+    /// [`Self::mix_step`]. Returns true when it extrapolated.
+    #[allow(clippy::type_complexity)]
+    fn settle_sweep<const C: usize>(
+        &self,
+        (guard, anderson, convergence): (&Guard, Option<&mut Anderson>, &mut Convergence),
+        (radiance, radiance_back, anti): (
+            &mut Vec<[f64; C]>,
+            &mut Vec<[f64; C]>,
+            &mut Vec<[f32; C]>,
+        ),
+        (next_radiance, next_radiance_back, next_anti): (&[[f64; C]], &[[f64; C]], &[[f32; C]]),
+        flat: (&mut Vec<f64>, &mut Vec<f64>),
+    ) -> bool {
+        damp_if_damped(guard, (radiance, next_radiance), (anti, next_anti));
+        if guard.damped() {
+            crate::solve::health::damp(radiance_back, next_radiance_back);
+        }
+        self.mix_step(
+            anderson,
+            convergence,
+            (radiance, radiance_back, anti),
+            (next_radiance, next_radiance_back, next_anti),
+            flat,
         )
     }
 
