@@ -226,10 +226,14 @@ impl Prepared {
             // axis's.
             let margin = tol + slab.deviation * (d + view.extent);
             let h = slab.axis.dot(p);
-            // A sender in the slab's plane (within the margin of its whole range) lights its
-            // elements at grazing incidence: nothing, as behind them (the per-element gather's
-            // cosine is then 0 up to rounding).
-            if (h - slab.lo).abs() <= margin && (h - slab.hi).abs() <= margin {
+            // A sender in the plane of a plane slab (within the margin of its whole range)
+            // lights its elements at grazing incidence: nothing, as behind them (the
+            // per-element gather's cosine is then 0 up to rounding). Not for slabs of a normal
+            // or a cell: their margin also holds senders clearly in front of some elements.
+            if view.mode == SlabMode::Planes
+                && (h - slab.lo).abs() <= margin
+                && (h - slab.hi).abs() <= margin
+            {
                 continue;
             }
             if side(h - slab.hi, h - slab.lo, margin)? {
