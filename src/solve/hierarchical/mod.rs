@@ -599,7 +599,7 @@ fn near_links_into_ancestors(
     let mut total = 0;
     let mut node = tree.elements[e];
     while node != NONE {
-        total += (fields.near_end[node as usize] - links.cluster_start[node as usize]) as usize;
+        total += fields.near_links(links, node).len();
         node = tree.nodes[node as usize].parent;
     }
     total

@@ -71,12 +71,9 @@ impl PairCache {
         for e in 0..n {
             let mut node = tree.elements[e];
             while node != NONE {
-                let (a, b) = (
-                    links.cluster_start[node as usize],
-                    prepared.fields.near_end[node as usize],
-                );
-                if b > a {
-                    ranges.push((a, b));
+                let near = prepared.fields.near_links(links, node);
+                if !near.is_empty() {
+                    ranges.push((near.start as u32, near.end as u32));
                 }
                 node = tree.nodes[node as usize].parent;
             }

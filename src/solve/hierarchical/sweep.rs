@@ -73,8 +73,7 @@ impl SweepContext<'_> {
         let two = self.elem_two.get(e).copied().unwrap_or(false);
         let mut node = self.tree.elements[e];
         while node != NONE {
-            let range = links.cluster_start[node as usize] as usize
-                ..self.fields.near_end[node as usize] as usize;
+            let range = self.fields.near_links(links, node);
             for (i, l) in range.clone().zip(&links.cluster[range]) {
                 f(i, l, self.pair_factor(l, n_e, x_e, back, two));
             }

@@ -161,7 +161,9 @@ impl Fields {
         for (j, &(k, _)) in keyed.iter().enumerate() {
             let end = (first + j + 1) as u32;
             if j > 0 && self.slot_key.last() == Some(&k) {
-                *self.slot_end.last_mut().expect("pushed") = end;
+                if let Some(last) = self.slot_end.last_mut() {
+                    *last = end;
+                }
                 continue;
             }
             let mask = (k >> MASK_SHIFT) as u16;
@@ -211,11 +213,13 @@ impl Fields {
             .map(|e| self.path(e).count() as u32)
             .collect();
         let mut start = Vec::with_capacity(n + 1);
-        start.push(0u32);
+        let mut total = 0u32;
+        start.push(total);
         for c in &counts {
-            start.push(start.last().expect("pushed") + c);
+            total += c;
+            start.push(total);
         }
-        self.evaluations = *start.last().expect("pushed") as u64;
+        self.evaluations = total as u64;
         let mut slab = vec![0u8; self.evaluations as usize];
         split_by_start(&mut slab, &start)
             .into_par_iter()
@@ -228,6 +232,11 @@ impl Fields {
             });
         self.elem_slab = slab;
         self.elem_slab_start = start;
+    }
+
+    /// The cluster links into `node` gathered per element (the rest go through its field).
+    pub(super) fn near_links(&self, links: &Links, node: u32) -> std::ops::Range<usize> {
+        links.cluster_start[node as usize] as usize..self.near_end[node as usize] as usize
     }
 
     /// The fields element `e` evaluates, each with the element's slab in it: its own node's
@@ -288,8 +297,7 @@ impl Fields {
     }
 
     /// Keeps antiradiance sums only for the slots whose bin some element below their field
-    /// stores (`live`); every slot keeps them until this is called. On the 1M-triangle
-    /// box most slots' bins are stored nowhere below them.
+    /// stores (`live`); every slot keeps them until this is called.
     pub(super) fn keep_live(&mut self, tree: &ClusterTree, live: &LiveBins) {
         let words = live.words;
         let mut next = 0u32;

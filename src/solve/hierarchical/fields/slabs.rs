@@ -105,37 +105,33 @@ impl Prepared {
                 };
             }
         }
-        let mut view = ReceiverView {
-            extent,
-            slabs: smallvec::SmallVec::new(),
-            mode: SlabMode::Grid,
+        // One slab per cell: its mean normal as the axis.
+        let empty = Slab {
+            axis: DVec3::ZERO,
+            deviation: 0.0,
+            lo: f64::INFINITY,
+            hi: f64::NEG_INFINITY,
         };
-        {
-            // One slab per cell: its mean normal as the axis.
-            let empty = Slab {
-                axis: DVec3::ZERO,
-                deviation: 0.0,
-                lo: f64::INFINITY,
-                hi: f64::NEG_INFINITY,
-            };
-            let mut slabs = [empty; MAX_SLABS];
-            for e in elements.clone() {
-                slabs[cells.bin_of(self.elem_normal[e])].axis += self.elem_normal[e];
-            }
-            for s in &mut slabs {
-                s.axis = s.axis.normalize_or_zero();
-            }
-            for e in elements {
-                let (n, x) = (self.elem_normal[e], self.elem_center[e]);
-                let s = &mut slabs[cells.bin_of(n)];
-                let h = s.axis.dot(x);
-                s.deviation = s.deviation.max((n - s.axis).length());
-                s.lo = s.lo.min(h);
-                s.hi = s.hi.max(h);
-            }
-            view.slabs = slabs.into_iter().collect();
+        let mut slabs = [empty; MAX_SLABS];
+        for e in elements.clone() {
+            slabs[cells.bin_of(self.elem_normal[e])].axis += self.elem_normal[e];
         }
-        view
+        for s in &mut slabs {
+            s.axis = s.axis.normalize_or_zero();
+        }
+        for e in elements {
+            let (n, x) = (self.elem_normal[e], self.elem_center[e]);
+            let s = &mut slabs[cells.bin_of(n)];
+            let h = s.axis.dot(x);
+            s.deviation = s.deviation.max((n - s.axis).length());
+            s.lo = s.lo.min(h);
+            s.hi = s.hi.max(h);
+        }
+        ReceiverView {
+            extent,
+            slabs: slabs.into_iter().collect(),
+            mode: SlabMode::Grid,
+        }
     }
 
     /// The slabs of `elements` by plane (normal and offset) or by normal alone, or `None`
