@@ -198,7 +198,10 @@ pub fn end_sweep(
         return true;
     }
     if convergence.sweep_done(iteration, change, tol) {
-        stats.converged = true;
+        match guard.clamped_failure(iteration, change) {
+            Some(failure) => stats.failure = Some(failure),
+            None => stats.converged = true,
+        }
         return true;
     }
     false

@@ -130,7 +130,12 @@ fn solve_one_sided(
     };
 
     for iteration in 1..=options.max_iterations {
-        let sweep = dense.sweep(&radiance, &anti, &mut next_radiance, &mut next_anti);
+        let projection = guard.projection();
+        let sweep = dense.sweep(
+            projection,
+            (&radiance, &anti),
+            (&mut next_radiance, &mut next_anti),
+        );
         if iteration == 1 {
             stats.max_row_sum = sweep.iter().map(|r| r.row).fold(0.0, f64::max);
             stats.links = sweep.iter().map(|r| r.links).sum();
@@ -307,20 +312,19 @@ struct Dense<'a> {
 
 impl Dense<'_> {
     /// One Jacobi sweep: every receiver gathers from every active sender, from `radiance` and
-    /// `anti` into `next_radiance` and `next_anti`.
+    /// `anti` into `next_radiance` and `next_anti`, each value written through `projection`.
     fn sweep(
         &self,
-        radiance: &[[f64; 3]],
-        anti: &[[f32; 3]],
-        next_radiance: &mut [[f64; 3]],
-        next_anti: &mut [[f32; 3]],
+        projection: health::Projection,
+        (radiance, anti): (&[[f64; 3]], &[[f32; 3]]),
+        (next_radiance, next_anti): (&mut [[f64; 3]], &mut [[f32; 3]]),
     ) -> Vec<ReceiverSweep> {
         let nb = self.bins.len();
         next_radiance
             .par_iter_mut()
             .zip(next_anti.par_chunks_mut(nb))
             .enumerate()
-            .map(|(r, (b_out, a_out))| self.gather(r, radiance, anti, b_out, a_out))
+            .map(|(r, (b_out, a_out))| self.gather(r, projection, (radiance, anti), b_out, a_out))
             .collect()
     }
 
@@ -329,8 +333,8 @@ impl Dense<'_> {
     fn gather(
         &self,
         r: usize,
-        radiance: &[[f64; 3]],
-        anti: &[[f32; 3]],
+        projection: health::Projection,
+        (radiance, anti): (&[[f64; 3]], &[[f32; 3]]),
         b_out: &mut [f64; 3],
         a_out: &mut [[f32; 3]],
     ) -> ReceiverSweep {
@@ -383,18 +387,20 @@ impl Dense<'_> {
         let scale = if capped { 1.0 / row } else { 1.0 };
         let mut largest = 0.0f64;
         let mut finite = true;
+        // The largest |B| and finiteness are of the values before the projection.
         for c in 0..3 {
-            b_out[c] = emission[r][c] + self.patches.albedo[r][c] * (scale * h[c]);
-            largest = largest.max(b_out[c].abs());
-            finite &= b_out[c].is_finite();
+            let b = emission[r][c] + self.patches.albedo[r][c] * (scale * h[c]);
+            largest = largest.max(b.abs());
+            finite &= b.is_finite();
+            b_out[c] = projection.apply(b);
         }
         for (dst, src) in a_out.iter_mut().zip(&a_acc) {
             *dst = if options.antiradiance {
-                src.map(|x| x as f32)
+                src.map(|x| projection.apply(x) as f32)
             } else {
                 [0.0; 3]
             };
-            finite &= dst.iter().all(|x| x.is_finite());
+            finite &= src.iter().all(|x| x.is_finite()) && dst.iter().all(|x| x.is_finite());
         }
         ReceiverSweep {
             row,

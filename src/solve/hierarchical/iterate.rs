@@ -139,16 +139,18 @@ impl Prepared {
         }
         let (mut x_flat, mut g_flat) = (Vec::new(), Vec::new());
         let mut scratch = Scratch::new(self, std::mem::take(&mut intensity));
-        let sources = Sources {
+        let mut sources = Sources {
             emission: &emission,
             emission_back: &emission_back,
             albedo: &albedo,
+            projection: guard.projection(),
         };
 
         let mut last = first - 1;
         for iteration in first..first + options.max_iterations {
             let sweep_start = Instant::now();
             last = iteration;
+            sources.projection = guard.projection();
             let sums = self.sweep_once(
                 &sources,
                 &mut scratch,

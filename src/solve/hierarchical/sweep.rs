@@ -195,6 +195,8 @@ pub(super) struct Sources<'a, const C: usize> {
     pub(super) emission: &'a [[f64; C]],
     pub(super) emission_back: &'a [[f64; C]],
     pub(super) albedo: &'a [[f64; C]],
+    /// The box this sweep's radiance and antiradiance are written into.
+    pub(super) projection: crate::solve::health::Projection,
 }
 
 /// What one sweep's gather reads: the links (and their pair cache), every cluster link's
@@ -327,23 +329,28 @@ impl SweepContext<'_> {
         let mut finite = true;
         let a = elem_area[e];
         let (mut num, mut den) = (0.0, 0.0);
+        // The largest |B| and finiteness are of the values before the projection (the guard
+        // must see what the sweep computed).
+        let box_ = sources.projection;
         for c in 0..C {
-            b_out[c] = emission[e][c] + albedo[e][c] * h[c];
-            largest = largest.max(b_out[c].abs());
-            finite &= b_out[c].is_finite();
+            let b = emission[e][c] + albedo[e][c] * h[c];
+            largest = largest.max(b.abs());
+            finite &= b.is_finite();
+            b_out[c] = box_.apply(b);
         }
         if let Some(back) = back_out {
             for c in 0..C {
-                back[c] = emission_back[e][c] + albedo[e][c] * h_back[c];
-                largest = largest.max(back[c].abs());
-                finite &= back[c].is_finite();
+                let b = emission_back[e][c] + albedo[e][c] * h_back[c];
+                largest = largest.max(b.abs());
+                finite &= b.is_finite();
+                back[c] = box_.apply(b);
                 num += a * (back[c] - radiance_back[e][c]).abs();
                 den += a * back[c].abs();
             }
         }
         for (dst, bin) in a_out.iter_mut().zip(live.bins_of(e)) {
-            *dst = a_acc[bin].map(|x| x as f32);
-            finite &= dst.iter().all(|x| x.is_finite());
+            *dst = a_acc[bin].map(|x| box_.apply(x) as f32);
+            finite &= a_acc[bin].iter().all(|x| x.is_finite()) && dst.iter().all(|x| x.is_finite());
         }
         num += (0..C)
             .map(|c| a * (b_out[c] - radiance[e][c]).abs())
