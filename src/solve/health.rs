@@ -143,9 +143,9 @@ pub const NEGATIVE_WARNING: f64 = 0.05;
 /// sweep against 1 + [`BOUND_SLACK`]).
 ///
 /// Measured on `../shared/meshes/b90_office.obj` (one-sided, 22,428 triangles, Venetian
-/// blinds): plain and damped sweeps diverged at sweep 18 (1.9e5 times the bound); projected,
-/// the solve converges in 21 sweeps, 3.7% from the path-traced reference (8,192 spp; bias
-/// -0.1%).
+/// blinds): plain and damped sweeps diverged at sweep 18 (1.9e5 times the bound); projected
+/// from the sweep damping starts (7), the solve converges in 31 sweeps, 4.3% from the
+/// path-traced reference (8,192 spp; bias +1.5%; docs/stability.md).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Projection {
     /// Smallest value written (0, or `-inf` when not projecting).
@@ -176,13 +176,7 @@ impl Projection {
     /// `x` clamped into the box (NaN stays NaN, so that the guard sees it).
     #[inline]
     pub fn apply(&self, x: f64) -> f64 {
-        if x < self.floor {
-            self.floor
-        } else if x > self.ceiling {
-            self.ceiling
-        } else {
-            x
-        }
+        x.clamp(self.floor, self.ceiling)
     }
 }
 
@@ -361,31 +355,18 @@ impl Guard {
         largest: f64,
         finite: bool,
     ) -> Option<SolveFailure> {
-        let bound_scene = self.bound.map_or(0.0, |b| b * self.scale);
-        let failure = |kind| SolveFailure {
-            kind,
-            sweep,
-            in_result: false,
-            residual,
-            change_over_min: 0.0,
-            growing_sweeps: 0,
-            largest_b_over_bound: 0.0,
-            bound: bound_scene,
-            negative_fraction: 0.0,
-            max_row_sum: 0.0,
-        };
         self.largest_over_bound = match self.bound {
             Some(b) => largest / b,
             None => 0.0,
         };
         let ratio = self.largest_over_bound;
         if !(finite && residual.is_finite() && change.is_finite() && largest.is_finite()) {
-            let mut f = failure(FailureKind::NonFinite);
+            let mut f = self.failure(sweep, residual, FailureKind::NonFinite);
             f.largest_b_over_bound = sanitize_ratio(ratio);
             return Some(f);
         }
         if ratio > DIVERGED_BOUND_FACTOR {
-            let mut f = failure(FailureKind::OverBound);
+            let mut f = self.failure(sweep, residual, FailureKind::OverBound);
             f.largest_b_over_bound = ratio;
             return Some(f);
         }
@@ -404,7 +385,7 @@ impl Guard {
             let growing = (self.rising >= GROWTH_SWEEPS && over_min > 2.0)
                 || (c > GROWTH_FLOOR && self.min_change.is_finite() && over_min > GROWTH_FACTOR);
             if growing {
-                let mut f = failure(FailureKind::Growing);
+                let mut f = self.failure(sweep, residual, FailureKind::Growing);
                 f.change_over_min = if self.min_change.is_finite() {
                     over_min
                 } else {
@@ -456,17 +437,27 @@ impl Guard {
     pub fn clamped_failure(&self, sweep: usize, residual: f64) -> Option<SolveFailure> {
         let projected = self.projection() != Projection::NONE;
         (projected && self.largest_over_bound > 1.0 + BOUND_SLACK).then(|| SolveFailure {
-            kind: FailureKind::OverBound,
-            sweep,
             in_result: true,
+            largest_b_over_bound: self.largest_over_bound,
+            ..self.failure(sweep, residual, FailureKind::OverBound)
+        })
+    }
+
+    /// A failure of `kind` found at sweep `sweep` with relative `residual`, during the sweeps,
+    /// with the bound in scene units; the other figures 0 for the caller to fill in.
+    fn failure(&self, sweep: usize, residual: f64, kind: FailureKind) -> SolveFailure {
+        SolveFailure {
+            kind,
+            sweep,
+            in_result: false,
             residual,
             change_over_min: 0.0,
             growing_sweeps: 0,
-            largest_b_over_bound: self.largest_over_bound,
+            largest_b_over_bound: 0.0,
             bound: self.bound.map_or(0.0, |b| b * self.scale),
             negative_fraction: 0.0,
             max_row_sum: 0.0,
-        })
+        }
     }
 
     /// The projection of the next sweep ([`Projection::of`] this guard's bound, once damped).

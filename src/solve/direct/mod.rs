@@ -609,7 +609,6 @@ impl<'a> DirectLight<'a> {
         };
         // A group no light-carrying sample reached takes the fraction of all samples; failing
         // that, 1.
-        let own = |j: usize| counts[j] > 0;
         let (a, v) =
             (0..lights.len()).fold((0.0, 0.0), |(a, v), j| (a + arriving[j], v + visible[j]));
         let pooled = if a > 0.0 {
@@ -619,7 +618,7 @@ impl<'a> DirectLight<'a> {
         };
         let mut light = [0.0f64; 3];
         for (j, l) in lights.iter().enumerate() {
-            let fraction = if own(j) && arriving[j] > 0.0 {
+            let fraction = if counts[j] > 0 && arriving[j] > 0.0 {
                 (visible[j] / arriving[j]).clamp(0.0, 1.0)
             } else {
                 pooled
