@@ -6,6 +6,7 @@
 //! equations are linear in E), so the answer does not depend on where, how large or how bright
 //! the scene is, and f32 storage neither overflows nor underflows.
 
+pub mod closed;
 pub mod lights;
 
 use glam::DVec3;

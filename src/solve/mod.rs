@@ -101,17 +101,29 @@ pub fn run(
     options: &SolverOptions,
     progress: &Progress,
 ) -> Result<Solution> {
+    // Closed objects with a dark inside are solved facing out (see `mesh::closed`), when
+    // backs exposed to light are blocked (the handling of files as found).
+    let outward = if options.antiradiance && options.block_exposed_backs && !options.two_sided {
+        patches.closed_objects_outward()
+    } else {
+        None
+    };
+    let solved = outward.as_ref().map_or(patches, |(p, _)| p);
     let solution = match (kind, options.direct_light) {
-        (SolverKind::Dense, false) => dense::solve_dense(patches, options, progress),
+        (SolverKind::Dense, false) => dense::solve_dense(solved, options, progress),
         (SolverKind::Hierarchical, false) => {
-            hierarchical::solve_hierarchical(patches, options, progress)
+            hierarchical::solve_hierarchical(solved, options, progress)
         }
-        (SolverKind::Dense, true) => direct::solve_dense_direct(patches, options, progress),
+        (SolverKind::Dense, true) => direct::solve_dense_direct(solved, options, progress),
         (SolverKind::Hierarchical, true) => {
-            direct::solve_hierarchical_direct(patches, options, progress)
+            direct::solve_hierarchical_direct(solved, options, progress)
         }
     };
     let mut solution = solution?;
+    if let (Some((_, turned)), Some(model)) = (&outward, solution.stats.model.as_mut()) {
+        model.closed_dark_objects = turned.objects;
+        model.turned_outward_patches = turned.turned;
+    }
     // Degenerate and duplicate triangles' patches get the values the model fixes for them,
     // whatever the solver left there.
     solution.settle_inactive(patches);

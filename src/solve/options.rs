@@ -43,7 +43,7 @@ pub struct SolverOptions {
     /// Largest share of the scene's transport a geometrically coarse link may carry and still
     /// be kept ([`crate::hierarchy::links::LinkParams::flux_share`]): small receivers
     /// (furniture, slivers) are not refined for light they barely carry. 0 turns it off;
-    /// 0..1e-4; [`crate::hierarchy::links::FLUX_SHARE`] (1e-5) by default.
+    /// 0..1e-4; [`crate::hierarchy::links::FLUX_SHARE`] (5e-6) by default.
     pub flux_share: f64,
     /// Receiver fields of the hierarchical solver ([`crate::solve::hierarchical`]): a cluster
     /// link whose receiver's extent is at most this times its distance from the sender (and

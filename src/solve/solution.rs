@@ -137,6 +137,10 @@ pub struct ModelStats {
     /// Input patches whose back is exposed to light and blocks it ([`crate::solve::model::exposed_backs`]; all of
     /// them with `two_sided`, none with `block_exposed_backs` off).
     pub back_blocking_patches: u64,
+    /// Closed objects whose inside no light reaches ([`crate::mesh::closed`]).
+    pub closed_dark_objects: u64,
+    /// Their patches that faced inside, solved turned outward and black.
+    pub turned_outward_patches: u64,
     /// Antiradiance values stored per sweep state: (element, bin) slots that some link both
     /// writes and reads.
     pub anti_bins_stored: u64,

@@ -291,6 +291,7 @@ impl Prepared {
                 anti_bins_stored: slots as u64,
                 anti_bins_full: (n * nb) as u64,
                 bytes_saved: full_bytes.saturating_sub(used_bytes),
+                ..ModelStats::default()
             }),
             ..SolveStats::default()
         }

@@ -1,0 +1,367 @@
+//! Closed objects turned outward: files as found orient their polygons at random, and a
+//! closed object (a box, a chair leg) whose inside no light reaches is solved as if its faces
+//! all faced out.
+//!
+//! A triangle of a closed object whose front faces the object's inside sees only the inside:
+//! its front receives nothing, so its outgoing radiance is its emission, and its back, lit
+//! from outside, absorbs and casts a shadow (a one-sided surface lit from behind). A triangle
+//! facing out is a one-sided surface as usual. Solving the reversed triangle as it is given
+//! costs a back-blocking surface and couplings among every pair of the object's faces, which
+//! must cancel the light that the antiradiance method lets through the object; solving it
+//! turned around, as a black one-sided surface facing out, gives the same answer with front-only
+//! antiradiance, whose plane tests cull every pair within a convex object.
+//!
+//! An object is *closed* when every edge of its triangles (vertices matched exactly, as an
+//! exporter shares them) joins exactly two of them, and their orientations can be made
+//! consistent; its outside is the side its signed volume says. Its inside is *dark* when no
+//! emitting triangle and no point or spot light lies within its bounds (conservatively: the
+//! bounds, not the volume). Objects with an emitting or a two-sided triangle are left alone.
+
+use std::collections::HashMap;
+
+use glam::DVec3;
+
+use super::Patches;
+use crate::scene::lights::Light;
+
+/// Smallest `|volume| / area^1.5` of a closed object that is turned outward: below it the
+/// object is flat (two triangles back to back, a folded sheet) and has no inside to speak of.
+/// A chair leg (radius 12 mm, 0.7 m) has 0.026, a slat 0.8 mm thick 0.002.
+pub const MIN_VOLUME_RATIO: f64 = 1e-4;
+
+/// Most (object, emitter) bound tests; above it no object is turned (the test is quadratic).
+const MAX_BOUND_TESTS: u64 = 100_000_000;
+
+/// What [`Patches::closed_objects_outward`] changed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Outward {
+    /// Closed objects with a dark inside.
+    pub objects: u64,
+    /// Their patches that faced inward and are solved turned around, black.
+    pub turned: u64,
+}
+
+impl Patches {
+    /// These patches with every closed, dark object's inward-facing patches turned around
+    /// (corners reversed) and made black (albedo and analytic source 0), and what changed;
+    /// `None` when nothing is turned. See the [module](self) for what counts as closed and
+    /// dark. The turned patches' front radiance is their emission, as the inside they faced
+    /// gives them nothing.
+    pub fn closed_objects_outward(&self) -> Option<(Patches, Outward)> {
+        let (turn, objects) = inward_fronts(self);
+        let turned = turn.iter().filter(|&&t| t).count() as u64;
+        if turned == 0 {
+            return None;
+        }
+        let mut out = self.clone();
+        for p in (0..self.len()).filter(|&p| turn[p]) {
+            let [a, b, c] = out.corners[p];
+            out.corners[p] = [a, c, b];
+            out.normal[p] = -out.normal[p];
+            out.albedo[p] = [0.0; 3];
+            if let Some(s) = out.source.get_mut(p) {
+                *s = [0.0; 3];
+            }
+        }
+        Some((out, Outward { objects, turned }))
+    }
+}
+
+/// Per patch: it belongs to a closed object with a dark inside and its front faces inside;
+/// and the number of such objects.
+pub fn inward_fronts(patches: &Patches) -> (Vec<bool>, u64) {
+    let n = patches.len();
+    let mut turn = vec![false; n];
+    // 1. Vertices matched exactly; every active, non-degenerate patch's three edges.
+    let mut ids: HashMap<[u64; 3], u32> = HashMap::new();
+    let mut vid = |p: DVec3| {
+        let key = [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
+        let next = ids.len() as u32;
+        *ids.entry(key).or_insert(next)
+    };
+    let mut verts = vec![[u32::MAX; 3]; n];
+    let mut edges: Vec<(u64, u32, bool)> = Vec::with_capacity(3 * n);
+    for p in 0..n {
+        if !patches.active[p] {
+            continue;
+        }
+        let v = patches.corners[p].map(&mut vid);
+        if v[0] == v[1] || v[1] == v[2] || v[0] == v[2] {
+            continue;
+        }
+        verts[p] = v;
+        for k in 0..3 {
+            let (a, b) = (v[k], v[(k + 1) % 3]);
+            let key = u64::from(a.min(b)) << 32 | u64::from(a.max(b));
+            edges.push((key, p as u32, a < b));
+        }
+    }
+    edges.sort_unstable();
+    // 2. Objects: patches joined across edges that join exactly two; an edge with one or more
+    //    than two makes its patches' object open. Each join says whether the two patches'
+    //    orientations agree (they run along the shared edge in opposite directions).
+    let mut parent: Vec<u32> = (0..n as u32).collect();
+    let mut open = vec![false; n];
+    let mut joins: Vec<(u32, u32, bool)> = Vec::new();
+    let mut i = 0;
+    while i < edges.len() {
+        let mut j = i + 1;
+        while j < edges.len() && edges[j].0 == edges[i].0 {
+            j += 1;
+        }
+        if j - i == 2 {
+            let ((_, p, dp), (_, q, dq)) = (edges[i], edges[i + 1]);
+            joins.push((p, q, dp != dq));
+            union(&mut parent, p, q);
+        } else {
+            for e in &edges[i..j] {
+                open[e.1 as usize] = true;
+            }
+        }
+        i = j;
+    }
+    let root: Vec<u32> = (0..n as u32).map(|p| find(&mut parent, p)).collect();
+    let mut object_open = vec![false; n];
+    for p in 0..n {
+        let r = root[p] as usize;
+        let emits = patches.emission[p].iter().any(|&e| e != 0.0) || patches.is_two_sided(p);
+        if verts[p][0] == u32::MAX || open[p] || emits {
+            object_open[r] = true;
+        }
+    }
+    // 3. Orientation: flip[p] relative to the object's first patch, by a walk over the joins.
+    let mut adjacency: Vec<Vec<(u32, bool)>> = vec![Vec::new(); n];
+    for &(p, q, agree) in &joins {
+        if !object_open[root[p as usize] as usize] {
+            adjacency[p as usize].push((q, agree));
+            adjacency[q as usize].push((p, agree));
+        }
+    }
+    let mut flip: Vec<Option<bool>> = vec![None; n];
+    let mut members: HashMap<u32, Vec<u32>> = HashMap::new();
+    for p in 0..n {
+        let r = root[p];
+        if verts[p][0] == u32::MAX || object_open[r as usize] || flip[p].is_some() {
+            continue;
+        }
+        let list = members.entry(r).or_default();
+        flip[p] = Some(false);
+        let mut stack = vec![p as u32];
+        while let Some(a) = stack.pop() {
+            list.push(a);
+            let fa = flip[a as usize].unwrap_or(false);
+            for &(b, agree) in &adjacency[a as usize] {
+                let want = fa ^ !agree;
+                match flip[b as usize] {
+                    None => {
+                        flip[b as usize] = Some(want);
+                        stack.push(b);
+                    }
+                    Some(f) if f != want => object_open[r as usize] = true,
+                    Some(_) => {}
+                }
+            }
+        }
+    }
+    // 4. Each closed object's outside from its signed volume; its inside dark when no emitter
+    //    and no point or spot light lies within its bounds.
+    let emitters: Vec<(DVec3, DVec3)> = (0..n)
+        .filter(|&p| patches.active[p] && patches.emission[p].iter().any(|&e| e != 0.0))
+        .map(|p| bounds_of(&patches.corners[p]))
+        .collect();
+    let lamps: Vec<DVec3> = patches
+        .lights
+        .iter()
+        .filter_map(|l| match l {
+            Light::Point { position, .. } | Light::Spot { position, .. } => Some(*position),
+            _ => None,
+        })
+        .collect();
+    let closed: Vec<&Vec<u32>> = members
+        .iter()
+        .filter(|(r, _)| !object_open[**r as usize])
+        .map(|(_, m)| m)
+        .collect();
+    if closed.len() as u64 * (emitters.len() + lamps.len()) as u64 > MAX_BOUND_TESTS {
+        return (turn, 0);
+    }
+    let mut objects = 0;
+    for list in closed {
+        let (lo, hi) = list.iter().fold(
+            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+            |(lo, hi), &p| {
+                let (a, b) = bounds_of(&patches.corners[p as usize]);
+                (lo.min(a), hi.max(b))
+            },
+        );
+        let centre = (lo + hi) * 0.5;
+        let (mut volume, mut area) = (0.0f64, 0.0f64);
+        for &p in list {
+            let [a, b, c] = patches.corners[p as usize].map(|x| x - centre);
+            let signed = a.dot(b.cross(c)) / 6.0;
+            volume += if flip[p as usize] == Some(true) {
+                -signed
+            } else {
+                signed
+            };
+            area += patches.area[p as usize];
+        }
+        if volume.abs() < MIN_VOLUME_RATIO * area.powf(1.5) {
+            continue;
+        }
+        let pad = DVec3::splat(crate::geometry::SCENE_EPS);
+        let (lo, hi) = (lo - pad, hi + pad);
+        let lit_inside = emitters
+            .iter()
+            .any(|&(a, b)| a.cmple(hi).all() && b.cmpge(lo).all())
+            || lamps
+                .iter()
+                .any(|&x| x.cmpge(lo).all() && x.cmple(hi).all());
+        if lit_inside {
+            continue;
+        }
+        objects += 1;
+        // Patches whose orientation disagrees with the outward one face inside.
+        let outward_flip = volume < 0.0;
+        for &p in list {
+            turn[p as usize] = flip[p as usize] != Some(outward_flip);
+        }
+    }
+    (turn, objects)
+}
+
+fn bounds_of(t: &[DVec3; 3]) -> (DVec3, DVec3) {
+    (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]))
+}
+
+fn find(parent: &mut [u32], mut x: u32) -> u32 {
+    while parent[x as usize] != x {
+        parent[x as usize] = parent[parent[x as usize] as usize];
+        x = parent[x as usize];
+    }
+    x
+}
+
+fn union(parent: &mut [u32], a: u32, b: u32) {
+    let (ra, rb) = (find(parent, a), find(parent, b));
+    if ra != rb {
+        parent[ra.max(rb) as usize] = ra.min(rb);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::Scene;
+
+    /// A unit cube at `at` (12 triangles facing out), as scene triangles.
+    fn cube(scene: &mut Scene, at: DVec3, size: f64) {
+        let base = scene.positions.len() as u32;
+        for i in 0..8 {
+            let c = DVec3::new((i & 1) as f64, ((i >> 1) & 1) as f64, ((i >> 2) & 1) as f64);
+            scene.positions.push(at + c * size);
+        }
+        // Quads (counter-clockwise from outside).
+        let quads = [
+            [0, 2, 3, 1],
+            [4, 5, 7, 6],
+            [0, 1, 5, 4],
+            [2, 6, 7, 3],
+            [0, 4, 6, 2],
+            [1, 3, 7, 5],
+        ];
+        for q in quads {
+            for t in [[q[0], q[1], q[2]], [q[0], q[2], q[3]]] {
+                scene.triangles.push(t.map(|k| base + k));
+                scene.albedo.push([0.5; 3]);
+                scene.emission.push([0.0; 3]);
+                scene.material.push(None);
+            }
+        }
+    }
+
+    /// A cube standing in a large emitting quad's light, far from it.
+    fn scene_with_cube() -> Scene {
+        let mut scene = Scene::default();
+        cube(&mut scene, DVec3::ZERO, 1.0);
+        let base = scene.positions.len() as u32;
+        for p in [
+            [-5.0, 4.0, -5.0],
+            [5.0, 4.0, -5.0],
+            [5.0, 4.0, 5.0],
+            [-5.0, 4.0, 5.0],
+        ] {
+            scene.positions.push(DVec3::from_array(p));
+        }
+        for t in [[0, 1, 2], [0, 2, 3]] {
+            scene.triangles.push(t.map(|k| base + k));
+            scene.albedo.push([0.0; 3]);
+            scene.emission.push([1.0; 3]);
+            scene.material.push(None);
+        }
+        scene
+    }
+
+    fn turned(scene: &Scene) -> (Vec<usize>, u64) {
+        let patches = crate::mesh::build_patches(scene, None);
+        let (turn, objects) = inward_fronts(&patches);
+        ((0..turn.len()).filter(|&p| turn[p]).collect(), objects)
+    }
+
+    #[test]
+    fn a_consistently_outward_cube_turns_nothing() {
+        assert_eq!(turned(&scene_with_cube()), (vec![], 1));
+    }
+
+    #[test]
+    fn a_cube_with_reversed_faces_turns_exactly_those() {
+        let mut scene = scene_with_cube();
+        for t in [1, 4, 7] {
+            scene.triangles[t].swap(1, 2);
+        }
+        assert_eq!(turned(&scene), (vec![1, 4, 7], 1));
+        let patches = crate::mesh::build_patches(&scene, None);
+        let (out, what) = patches.closed_objects_outward().unwrap();
+        assert_eq!(
+            what,
+            Outward {
+                objects: 1,
+                turned: 3
+            }
+        );
+        for t in [1, 4, 7] {
+            assert!(out.normal[t].dot(patches.normal[t]) < -0.99);
+            assert_eq!(out.albedo[t], [0.0; 3]);
+        }
+        assert_eq!(out.albedo[0], patches.albedo[0]);
+    }
+
+    #[test]
+    fn a_cube_facing_inward_turns_every_face() {
+        let mut scene = scene_with_cube();
+        for t in 0..12 {
+            scene.triangles[t].swap(1, 2);
+        }
+        assert_eq!(turned(&scene), ((0..12).collect(), 1));
+    }
+
+    #[test]
+    fn an_open_or_lit_inside_cube_is_left_alone() {
+        let mut open = scene_with_cube();
+        open.triangles[1].swap(1, 2);
+        open.triangles.remove(0);
+        assert_eq!(turned(&open), (vec![], 0));
+        // An emitter inside the cube's bounds: the inside may be lit.
+        let mut lit = scene_with_cube();
+        lit.triangles[1].swap(1, 2);
+        let base = lit.positions.len() as u32;
+        for p in [[0.2, 0.5, 0.2], [0.8, 0.5, 0.2], [0.5, 0.5, 0.8]] {
+            lit.positions.push(DVec3::from_array(p));
+        }
+        lit.triangles.push([base, base + 2, base + 1]);
+        lit.albedo.push([0.0; 3]);
+        lit.emission.push([1.0; 3]);
+        lit.material.push(None);
+        assert_eq!(turned(&lit), (vec![], 0));
+    }
+}
