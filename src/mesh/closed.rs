@@ -15,7 +15,9 @@
 //! exporter shares them) joins exactly two of them, and their orientations can be made
 //! consistent; its outside is the side its signed volume says. Its inside is *dark* when no
 //! emitting triangle and no point or spot light lies within its bounds (conservatively: the
-//! bounds, not the volume). Objects with an emitting or a two-sided triangle are left alone.
+//! bounds, not the volume). Objects with an emitting triangle, or with both one-sided and
+//! two-sided triangles, are left alone. A two-sided object's faces inside are dark too, so it
+//! is solved one-sided, facing out, and its faces are put back after the solve.
 
 use std::collections::HashMap;
 
@@ -33,45 +35,113 @@ pub const MIN_VOLUME_RATIO: f64 = 1e-4;
 const MAX_BOUND_TESTS: u64 = 100_000_000;
 
 /// What [`Patches::closed_objects_outward`] changed.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct Outward {
     /// Closed objects with a dark inside.
     pub objects: u64,
-    /// Their patches that faced inward and are solved turned around, black.
+    /// Their patches that faced inward and are solved turned around.
     pub turned: u64,
+    /// The turned patches that were two-sided: their solved front is their back face (see
+    /// [`Outward::restore`]).
+    pub turned_two_sided: Vec<u32>,
 }
 
 impl Patches {
-    /// These patches with every closed, dark object's inward-facing patches turned around
-    /// (corners reversed) and made black (albedo and analytic source 0), and what changed;
-    /// `None` when nothing is turned. See the [module](self) for what counts as closed and
-    /// dark. The turned patches' front radiance is their emission, as the inside they faced
-    /// gives them nothing.
+    /// These patches with every closed, dark object solved facing out, and what changed;
+    /// `None` when nothing changes. See the [module](self) for what counts as closed and dark.
+    ///
+    /// - A one-sided object's inward-facing patches are turned around (corners reversed) and
+    ///   made black (albedo and analytic source 0): their front radiance is their emission.
+    /// - A two-sided object's patches become one-sided (their faces inside are dark), its
+    ///   inward-facing ones turned around with their back face's analytic source; after the
+    ///   solve [`Outward::restore`] gives each its two faces back.
     pub fn closed_objects_outward(&self) -> Option<(Patches, Outward)> {
-        let (turn, objects) = inward_fronts(self);
-        let turned = turn.iter().filter(|&&t| t).count() as u64;
-        if turned == 0 {
+        let closed = closed_dark_objects(self);
+        if closed.objects == 0 {
             return None;
         }
         let mut out = self.clone();
-        for p in (0..self.len()).filter(|&p| turn[p]) {
+        let mut turned_two_sided = Vec::new();
+        let mut turned = 0;
+        for p in (0..self.len()).filter(|&p| closed.member[p]) {
+            let two_sided = self.is_two_sided(p);
+            if two_sided {
+                out.two_sided[p] = false;
+            }
+            if !closed.turn[p] {
+                continue;
+            }
+            turned += 1;
             let [a, b, c] = out.corners[p];
             out.corners[p] = [a, c, b];
             out.normal[p] = -out.normal[p];
-            out.albedo[p] = [0.0; 3];
-            if let Some(s) = out.source.get_mut(p) {
-                *s = [0.0; 3];
+            if two_sided {
+                turned_two_sided.push(p as u32);
+                if let Some(s) = out.source.get_mut(p) {
+                    *s = self.source_back.get(p).copied().unwrap_or([0.0; 3]);
+                }
+            } else {
+                out.albedo[p] = [0.0; 3];
+                if let Some(s) = out.source.get_mut(p) {
+                    *s = [0.0; 3];
+                }
             }
         }
-        Some((out, Outward { objects, turned }))
+        if out.two_sided.iter().all(|&t| !t) {
+            out.two_sided = Vec::new();
+            out.source_back = Vec::new();
+        }
+        Some((
+            out,
+            Outward {
+                objects: closed.objects,
+                turned,
+                turned_two_sided,
+            },
+        ))
     }
 }
 
-/// Per patch: it belongs to a closed object with a dark inside and its front faces inside;
-/// and the number of such objects.
-pub fn inward_fronts(patches: &Patches) -> (Vec<bool>, u64) {
+impl Outward {
+    /// Puts back the faces of `solution` (solved on the patches
+    /// [`Patches::closed_objects_outward`] made from `patches`): a turned two-sided patch's
+    /// solved front is its back face, and its front (inside) has the dark inside's radiance,
+    /// its emission 0; every other patch of `patches` with two faces keeps what was solved
+    /// (0 behind for the objects' patches made one-sided). Call before
+    /// [`crate::solve::solution::Solution::settle_inactive`], which remakes the per-triangle
+    /// values.
+    pub fn restore(&self, solution: &mut crate::solve::solution::Solution, patches: &Patches) {
+        if !patches.has_two_sided() {
+            return;
+        }
+        solution
+            .patch_radiance_back
+            .resize(solution.patch_radiance.len(), [0.0; 3]);
+        for &p in &self.turned_two_sided {
+            let p = p as usize;
+            solution.patch_radiance_back[p] = solution.patch_radiance[p];
+            solution.patch_radiance[p] = [0.0; 3];
+        }
+    }
+}
+
+/// The closed objects with a dark inside ([`closed_dark_objects`]).
+#[derive(Clone, Debug, Default)]
+pub struct Closed {
+    /// Per patch: it belongs to such an object and its front faces inside.
+    pub turn: Vec<bool>,
+    /// Per patch: it belongs to such an object.
+    pub member: Vec<bool>,
+    /// The number of such objects.
+    pub objects: u64,
+}
+
+/// The closed objects of `patches` whose inside is dark (see the [module](self)); objects
+/// whose patches are all one-sided or all two-sided, never a mix.
+pub fn closed_dark_objects(patches: &Patches) -> Closed {
     let n = patches.len();
     let mut turn = vec![false; n];
+    let mut member = vec![false; n];
     // 1. Vertices matched exactly; every active, non-degenerate patch's three edges.
     let mut ids: HashMap<[u64; 3], u32> = HashMap::new();
     let mut vid = |p: DVec3| {
@@ -122,10 +192,18 @@ pub fn inward_fronts(patches: &Patches) -> (Vec<bool>, u64) {
     }
     let root: Vec<u32> = (0..n as u32).map(|p| find(&mut parent, p)).collect();
     let mut object_open = vec![false; n];
+    // Per object: 1 when some patch is one-sided, 2 when some is two-sided (3: both, left alone).
+    let mut sides = vec![0u8; n];
     for p in 0..n {
         let r = root[p] as usize;
-        let emits = patches.emission[p].iter().any(|&e| e != 0.0) || patches.is_two_sided(p);
+        let emits = patches.emission[p].iter().any(|&e| e != 0.0);
+        sides[r] |= if patches.is_two_sided(p) { 2 } else { 1 };
         if verts[p][0] == u32::MAX || open[p] || emits {
+            object_open[r] = true;
+        }
+    }
+    for r in 0..n {
+        if sides[r] == 3 {
             object_open[r] = true;
         }
     }
@@ -183,7 +261,11 @@ pub fn inward_fronts(patches: &Patches) -> (Vec<bool>, u64) {
         .map(|(_, m)| m)
         .collect();
     if closed.len() as u64 * (emitters.len() + lamps.len()) as u64 > MAX_BOUND_TESTS {
-        return (turn, 0);
+        return Closed {
+            turn,
+            member,
+            objects: 0,
+        };
     }
     let mut objects = 0;
     for list in closed {
@@ -225,9 +307,14 @@ pub fn inward_fronts(patches: &Patches) -> (Vec<bool>, u64) {
         let outward_flip = volume < 0.0;
         for &p in list {
             turn[p as usize] = flip[p as usize] != Some(outward_flip);
+            member[p as usize] = true;
         }
     }
-    (turn, objects)
+    Closed {
+        turn,
+        member,
+        objects,
+    }
 }
 
 fn bounds_of(t: &[DVec3; 3]) -> (DVec3, DVec3) {
@@ -304,8 +391,12 @@ mod tests {
 
     fn turned(scene: &Scene) -> (Vec<usize>, u64) {
         let patches = crate::mesh::build_patches(scene, None);
-        let (turn, objects) = inward_fronts(&patches);
-        ((0..turn.len()).filter(|&p| turn[p]).collect(), objects)
+        let closed = closed_dark_objects(&patches);
+        let turn = closed.turn;
+        (
+            (0..turn.len()).filter(|&p| turn[p]).collect(),
+            closed.objects,
+        )
     }
 
     #[test]
@@ -322,13 +413,8 @@ mod tests {
         assert_eq!(turned(&scene), (vec![1, 4, 7], 1));
         let patches = crate::mesh::build_patches(&scene, None);
         let (out, what) = patches.closed_objects_outward().unwrap();
-        assert_eq!(
-            what,
-            Outward {
-                objects: 1,
-                turned: 3
-            }
-        );
+        assert_eq!((what.objects, what.turned), (1, 3));
+        assert!(what.turned_two_sided.is_empty());
         for t in [1, 4, 7] {
             assert!(out.normal[t].dot(patches.normal[t]) < -0.99);
             assert_eq!(out.albedo[t], [0.0; 3]);

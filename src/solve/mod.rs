@@ -120,9 +120,12 @@ pub fn run(
         }
     };
     let mut solution = solution?;
-    if let (Some((_, turned)), Some(model)) = (&outward, solution.stats.model.as_mut()) {
-        model.closed_dark_objects = turned.objects;
-        model.turned_outward_patches = turned.turned;
+    if let Some((_, turned)) = &outward {
+        turned.restore(&mut solution, patches);
+        if let Some(model) = solution.stats.model.as_mut() {
+            model.closed_dark_objects = turned.objects;
+            model.turned_outward_patches = turned.turned;
+        }
     }
     // Degenerate and duplicate triangles' patches get the values the model fixes for them,
     // whatever the solver left there.
