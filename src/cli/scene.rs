@@ -136,8 +136,9 @@ pub struct VariantArgs {
         allow_negative_numbers = true
     )]
     pub albedo: f64,
-    /// As for solve: triangles with all three vertices above Y emit (used only to tell
-    /// materials apart; pass it again when solving the output).
+    /// As for solve: triangles with all three vertices above Y emit. The output writes them
+    /// as materials with their emission (`Ke`), so solve it without --emit-above (the rule
+    /// applied to the variant's own triangles would select others: slivers of a wall).
     #[arg(long, value_name = "Y", allow_negative_numbers = true)]
     pub emit_above: Option<f64>,
     /// As for solve: the radiance of the --emit-above emitters.
@@ -348,7 +349,7 @@ fn variant(a: &VariantArgs) -> Result<()> {
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_default(),
     );
-    variants::write_variant(&variant, out, &mtl, &title)?;
+    variants::write_variant(&variant, out, &mtl, &title, a.emit_above.is_some())?;
     if !a.out.quiet {
         eprintln!(
             "wrote {}, {} and {}: {} triangles from {} ({})",

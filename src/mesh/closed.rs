@@ -139,10 +139,28 @@ pub struct Closed {
 /// The closed objects of `patches` whose inside is dark (see the [module](self)); objects
 /// whose patches are all one-sided or all two-sided, never a mix.
 pub fn closed_dark_objects(patches: &Patches) -> Closed {
+    let (verts, edges) = edges_of(patches);
+    let (root, mut open, joins) = join(patches, &verts, &edges);
+    let (flip, members) = orient(patches.len(), &verts, &root, &mut open, &joins);
+    let closed: Vec<&Vec<u32>> = members
+        .iter()
+        .filter(|(r, _)| !open[**r as usize])
+        .map(|(_, m)| m)
+        .collect();
+    outward_if_dark(patches, &flip, &closed)
+}
+
+/// An edge of a patch: (key of its two vertex ids, patch, runs from the smaller id).
+type Edge = (u64, u32, bool);
+
+/// Two patches sharing an edge: (patch, patch, their orientations agree).
+type Join = (u32, u32, bool);
+
+/// 1. Vertices matched exactly: per patch its three vertex ids (`u32::MAX` for an inactive or
+///    degenerate one), and every edge as (vertex pair key, patch, runs from the smaller id),
+///    sorted.
+fn edges_of(patches: &Patches) -> (Vec<[u32; 3]>, Vec<Edge>) {
     let n = patches.len();
-    let mut turn = vec![false; n];
-    let mut member = vec![false; n];
-    // 1. Vertices matched exactly; every active, non-degenerate patch's three edges.
     let mut ids: HashMap<[u64; 3], u32> = HashMap::new();
     let mut vid = |p: DVec3| {
         let key = [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
@@ -150,11 +168,8 @@ pub fn closed_dark_objects(patches: &Patches) -> Closed {
         *ids.entry(key).or_insert(next)
     };
     let mut verts = vec![[u32::MAX; 3]; n];
-    let mut edges: Vec<(u64, u32, bool)> = Vec::with_capacity(3 * n);
-    for p in 0..n {
-        if !patches.active[p] {
-            continue;
-        }
+    let mut edges: Vec<Edge> = Vec::with_capacity(3 * n);
+    for p in (0..n).filter(|&p| patches.active[p]) {
         let v = patches.corners[p].map(&mut vid);
         if v[0] == v[1] || v[1] == v[2] || v[0] == v[2] {
             continue;
@@ -167,12 +182,19 @@ pub fn closed_dark_objects(patches: &Patches) -> Closed {
         }
     }
     edges.sort_unstable();
-    // 2. Objects: patches joined across edges that join exactly two; an edge with one or more
-    //    than two makes its patches' object open. Each join says whether the two patches'
-    //    orientations agree (they run along the shared edge in opposite directions).
+    (verts, edges)
+}
+
+/// 2. Objects: patches joined across edges that join exactly two. Returns per patch its
+///    object (a root patch), per root whether the object is left alone (an edge with one or
+///    more than two patches, a degenerate patch, an emitter, one- and two-sided patches mixed),
+///    and each join as (patch, patch, orientations agree: they run along the edge in opposite
+///    directions).
+fn join(patches: &Patches, verts: &[[u32; 3]], edges: &[Edge]) -> (Vec<u32>, Vec<bool>, Vec<Join>) {
+    let n = patches.len();
     let mut parent: Vec<u32> = (0..n as u32).collect();
-    let mut open = vec![false; n];
-    let mut joins: Vec<(u32, u32, bool)> = Vec::new();
+    let mut open_edge = vec![false; n];
+    let mut joins: Vec<Join> = Vec::new();
     let mut i = 0;
     while i < edges.len() {
         let mut j = i + 1;
@@ -185,32 +207,43 @@ pub fn closed_dark_objects(patches: &Patches) -> Closed {
             union(&mut parent, p, q);
         } else {
             for e in &edges[i..j] {
-                open[e.1 as usize] = true;
+                open_edge[e.1 as usize] = true;
             }
         }
         i = j;
     }
     let root: Vec<u32> = (0..n as u32).map(|p| find(&mut parent, p)).collect();
-    let mut object_open = vec![false; n];
-    // Per object: 1 when some patch is one-sided, 2 when some is two-sided (3: both, left alone).
+    let mut open = vec![false; n];
+    // Per object: 1 when some patch is one-sided, 2 when some is two-sided.
     let mut sides = vec![0u8; n];
     for p in 0..n {
         let r = root[p] as usize;
         let emits = patches.emission[p].iter().any(|&e| e != 0.0);
         sides[r] |= if patches.is_two_sided(p) { 2 } else { 1 };
-        if verts[p][0] == u32::MAX || open[p] || emits {
-            object_open[r] = true;
+        if verts[p][0] == u32::MAX || open_edge[p] || emits {
+            open[r] = true;
         }
     }
     for r in 0..n {
-        if sides[r] == 3 {
-            object_open[r] = true;
-        }
+        open[r] |= sides[r] == 3;
     }
-    // 3. Orientation: flip[p] relative to the object's first patch, by a walk over the joins.
+    (root, open, joins)
+}
+
+/// 3. Orientation: per patch of an object not left alone, whether it is flipped against the
+///    object's first patch (a walk over the joins), and each object's patches by root. An
+///    object whose orientations cannot be made consistent is left alone (`open`).
+#[allow(clippy::type_complexity)]
+fn orient(
+    n: usize,
+    verts: &[[u32; 3]],
+    root: &[u32],
+    open: &mut [bool],
+    joins: &[Join],
+) -> (Vec<Option<bool>>, HashMap<u32, Vec<u32>>) {
     let mut adjacency: Vec<Vec<(u32, bool)>> = vec![Vec::new(); n];
-    for &(p, q, agree) in &joins {
-        if !object_open[root[p as usize] as usize] {
+    for &(p, q, agree) in joins {
+        if !open[root[p as usize] as usize] {
             adjacency[p as usize].push((q, agree));
             adjacency[q as usize].push((p, agree));
         }
@@ -219,7 +252,7 @@ pub fn closed_dark_objects(patches: &Patches) -> Closed {
     let mut members: HashMap<u32, Vec<u32>> = HashMap::new();
     for p in 0..n {
         let r = root[p];
-        if verts[p][0] == u32::MAX || object_open[r as usize] || flip[p].is_some() {
+        if verts[p][0] == u32::MAX || open[r as usize] || flip[p].is_some() {
             continue;
         }
         let list = members.entry(r).or_default();
@@ -235,14 +268,26 @@ pub fn closed_dark_objects(patches: &Patches) -> Closed {
                         flip[b as usize] = Some(want);
                         stack.push(b);
                     }
-                    Some(f) if f != want => object_open[r as usize] = true,
+                    Some(f) if f != want => open[r as usize] = true,
                     Some(_) => {}
                 }
             }
         }
     }
-    // 4. Each closed object's outside from its signed volume; its inside dark when no emitter
-    //    and no point or spot light lies within its bounds.
+    (flip, members)
+}
+
+/// 4. Each closed object's outside from its signed volume (none below [`MIN_VOLUME_RATIO`]);
+///    its inside dark when no emitter and no point or spot light lies within its bounds. The
+///    dark objects' patches are members, those whose orientation disagrees with the outward
+///    one turned.
+fn outward_if_dark(patches: &Patches, flip: &[Option<bool>], closed: &[&Vec<u32>]) -> Closed {
+    let n = patches.len();
+    let mut out = Closed {
+        turn: vec![false; n],
+        member: vec![false; n],
+        objects: 0,
+    };
     let emitters: Vec<(DVec3, DVec3)> = (0..n)
         .filter(|&p| patches.active[p] && patches.emission[p].iter().any(|&e| e != 0.0))
         .map(|p| bounds_of(&patches.corners[p]))
@@ -255,19 +300,9 @@ pub fn closed_dark_objects(patches: &Patches) -> Closed {
             _ => None,
         })
         .collect();
-    let closed: Vec<&Vec<u32>> = members
-        .iter()
-        .filter(|(r, _)| !object_open[**r as usize])
-        .map(|(_, m)| m)
-        .collect();
     if closed.len() as u64 * (emitters.len() + lamps.len()) as u64 > MAX_BOUND_TESTS {
-        return Closed {
-            turn,
-            member,
-            objects: 0,
-        };
+        return out;
     }
-    let mut objects = 0;
     for list in closed {
         let (lo, hi) = list.iter().fold(
             (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
@@ -278,7 +313,7 @@ pub fn closed_dark_objects(patches: &Patches) -> Closed {
         );
         let centre = (lo + hi) * 0.5;
         let (mut volume, mut area) = (0.0f64, 0.0f64);
-        for &p in list {
+        for &p in list.iter() {
             let [a, b, c] = patches.corners[p as usize].map(|x| x - centre);
             let signed = a.dot(b.cross(c)) / 6.0;
             volume += if flip[p as usize] == Some(true) {
@@ -293,28 +328,23 @@ pub fn closed_dark_objects(patches: &Patches) -> Closed {
         }
         let pad = DVec3::splat(crate::geometry::SCENE_EPS);
         let (lo, hi) = (lo - pad, hi + pad);
+        let inside = |x: DVec3| x.cmpge(lo).all() && x.cmple(hi).all();
         let lit_inside = emitters
             .iter()
             .any(|&(a, b)| a.cmple(hi).all() && b.cmpge(lo).all())
-            || lamps
-                .iter()
-                .any(|&x| x.cmpge(lo).all() && x.cmple(hi).all());
+            || lamps.iter().any(|&x| inside(x));
         if lit_inside {
             continue;
         }
-        objects += 1;
+        out.objects += 1;
         // Patches whose orientation disagrees with the outward one face inside.
         let outward_flip = volume < 0.0;
-        for &p in list {
-            turn[p as usize] = flip[p as usize] != Some(outward_flip);
-            member[p as usize] = true;
+        for &p in list.iter() {
+            out.turn[p as usize] = flip[p as usize] != Some(outward_flip);
+            out.member[p as usize] = true;
         }
     }
-    Closed {
-        turn,
-        member,
-        objects,
-    }
+    out
 }
 
 fn bounds_of(t: &[DVec3; 3]) -> (DVec3, DVec3) {

@@ -18,13 +18,27 @@ use std::path::Path;
 /// [`crate::scene::load_obj`] reads back the variant's triangles in order with the input's
 /// materials and scene options apply as they did to the input.
 ///
+/// With `emitters_as_materials` (the input's emitters came from a rule such as `--emit-above`,
+/// which re-applied to the variant's own triangles would select others: a wall's sliver with
+/// its three corners above the line), every emitting triangle is written with a material of
+/// its own emission (`Ke`) and, when it has a material, albedo (`Kd`), named `emitter_N`,
+/// appended to the MTL file (and
+/// a triangle without a material after one gets `no_material`, which has no `Kd`): the
+/// variant then solves with the input's emitters and no rule.
+///
 /// Each file is written atomically, the MTL and map files first; on failure the files this
 /// call created are removed again.
 ///
 /// Errors: [`Error::Parameter`] for an `out` without a file name or ending in `.mtl`, or a
 /// triangle whose material has no name; [`Error::Io`] (one line naming the file) when a file
 /// cannot be written.
-pub fn write_variant(variant: &Variant, out: &Path, mtl_text: &str, title: &str) -> Result<()> {
+pub fn write_variant(
+    variant: &Variant,
+    out: &Path,
+    mtl_text: &str,
+    title: &str,
+    emitters_as_materials: bool,
+) -> Result<()> {
     let scene = &variant.scene;
     let mtl_path = out.with_extension("mtl");
     let map = map_path(out);
@@ -48,7 +62,7 @@ pub fn write_variant(variant: &Variant, out: &Path, mtl_text: &str, title: &str)
     if !mtl.ends_with('\n') {
         mtl.push('\n');
     }
-
+    let (emitter_of, emitters) = emitter_materials(scene, emitters_as_materials, &mut mtl);
     let mut obj = header;
     let _ = writeln!(
         obj,
@@ -63,16 +77,27 @@ pub fn write_variant(variant: &Variant, out: &Path, mtl_text: &str, title: &str)
     for p in &scene.positions {
         let _ = writeln!(obj, "v {} {} {}", p.x, p.y, p.z);
     }
-    let mut current: Option<u32> = None;
+    // Materials as (scene material, emitter material); an emitter material wins.
+    let mut current: Option<(Option<u32>, Option<usize>)> = None;
     for (t, f) in scene.triangles.iter().enumerate() {
-        let m = material_of(scene, t);
-        if m != current {
-            let Some(m) = m else {
-                return Err(Error::Parameter(format!(
-                    "variant: triangle {t} has no material after triangles that have one"
-                )));
-            };
-            let _ = writeln!(obj, "usemtl {}", scene.material_names[m as usize]);
+        let m = (material_of(scene, t), emitter_of[t]);
+        if current != Some(m) && (m.0.is_some() || m.1.is_some() || current.is_some()) {
+            match m {
+                (_, Some(e)) => {
+                    let _ = writeln!(obj, "usemtl emitter_{e}");
+                }
+                (Some(m), None) => {
+                    let _ = writeln!(obj, "usemtl {}", scene.material_names[m as usize]);
+                }
+                (None, None) if emitters > 0 => {
+                    let _ = writeln!(obj, "usemtl no_material");
+                }
+                (None, None) => {
+                    return Err(Error::Parameter(format!(
+                        "variant: triangle {t} has no material after triangles that have one"
+                    )));
+                }
+            }
             current = Some(m);
         }
         let _ = writeln!(obj, "f {} {} {}", f[0] + 1, f[1] + 1, f[2] + 1);
@@ -106,6 +131,47 @@ pub fn write_variant(variant: &Variant, out: &Path, mtl_text: &str, title: &str)
         remove_new();
     }
     written
+}
+
+/// The emitter materials of [`write_variant`]: per triangle the index of its own (distinct
+/// albedo, when the triangle has a material, and emission, bit for bit, in order of first use),
+/// appended to `mtl` with `no_material` for triangles without one; none unless `on`. Returns
+/// the indices and the number of emitter materials.
+fn emitter_materials(scene: &Scene, on: bool, mtl: &mut String) -> (Vec<Option<usize>>, usize) {
+    // A triangle without a material keeps taking the solve's --albedo.
+    type Emitter = (Option<[f64; 3]>, [f64; 3]);
+    let mut emitters: Vec<Emitter> = Vec::new();
+    let emitter_of: Vec<Option<usize>> = (0..scene.len())
+        .map(|t| {
+            let e = scene.emission[t];
+            if !on || e.iter().all(|&x| x == 0.0) {
+                return None;
+            }
+            let key: Emitter = (material_of(scene, t).map(|_| scene.albedo[t]), e);
+            let bits = |k: &Emitter| (k.0.map(|a| a.map(f64::to_bits)), k.1.map(f64::to_bits));
+            Some(
+                emitters
+                    .iter()
+                    .position(|k| bits(k) == bits(&key))
+                    .unwrap_or_else(|| {
+                        emitters.push(key);
+                        emitters.len() - 1
+                    }),
+            )
+        })
+        .collect();
+    if !emitters.is_empty() {
+        // For triangles without a material after an emitter's (no `Kd`: the solve's --albedo).
+        mtl.push_str("\nnewmtl no_material\n");
+    }
+    for (i, (kd, ke)) in emitters.iter().enumerate() {
+        let _ = writeln!(mtl, "\nnewmtl emitter_{i}");
+        if let Some(kd) = kd {
+            let _ = writeln!(mtl, "Kd {} {} {}", kd[0], kd[1], kd[2]);
+        }
+        let _ = writeln!(mtl, "Ke {} {} {}", ke[0], ke[1], ke[2]);
+    }
+    (emitter_of, emitters.len())
 }
 
 /// Reads a map written by [`write_variant`].

@@ -211,7 +211,9 @@ enum Lighting {
 impl Relighter {
     /// Builds patches (`max_edge` splits input triangles as in [`mesh::build_patches`];
     /// `None` keeps them), cluster tree and links of `scene` for `options`. The emission and
-    /// analytic lights are the scene's own until changed.
+    /// analytic lights are the scene's own until changed. Closed objects are solved as given,
+    /// not turned outward as [`crate::solve::run`] does ([`crate::mesh::closed`]): any
+    /// triangle may be made to emit, also one facing an object's inside.
     ///
     /// Errors: [`Error::Parameter`] for invalid `options`, a `max_edge` that is not a finite
     /// positive length or would make more than [`mesh::MAX_PATCHES`] patches, invalid
