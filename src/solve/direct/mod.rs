@@ -82,6 +82,10 @@ pub const MAX_SHADOW_RAYS: u64 = 8_000_000;
 /// Fewest shadow samples per receiving element (a square, for stratification).
 pub const MIN_SHADOW_SAMPLES: usize = 16;
 
+/// Most emitter groups that raise the shadow samples per receiver ([`shadow_samples_for`]:
+/// [`MIN_SHADOW_SAMPLES`] per group, so 64 at most from this rule).
+pub const GROUP_SAMPLE_GROUPS: usize = 4;
+
 /// Most shadow samples per receiving element (a square, for stratification).
 pub const MAX_SHADOW_SAMPLES: usize = 1024;
 
@@ -165,11 +169,30 @@ fn receiver_points(ratio: f64) -> usize {
     }
 }
 
-/// Mean shadow samples per receiver for `receivers` receivers: the ray budget spread evenly,
-/// clamped, rounded down to a square k x k.
+/// Mean shadow samples per receiver for `receivers` receivers lit by one emitter group: the
+/// ray budget spread evenly, clamped, rounded down to a square k x k.
 pub fn shadow_samples(receivers: usize) -> usize {
-    let wanted =
-        (SHADOW_RAY_BUDGET / receivers.max(1)).clamp(MIN_SHADOW_SAMPLES, MAX_SHADOW_SAMPLES);
+    shadow_samples_for(receivers, 1)
+}
+
+/// Mean shadow samples per receiver for `receivers` receivers lit by `groups` emitter groups:
+/// the ray budget spread evenly, and at least [`MIN_SHADOW_SAMPLES`] per group up to
+/// [`GROUP_SAMPLE_GROUPS`] groups while the pass stays within [`MAX_SHADOW_RAYS`]; clamped,
+/// rounded down to a square k x k.
+///
+/// Each group takes the visible fraction of its own samples (a ratio estimator whose bias and
+/// noise fall as 1 / samples per group), so a receiver lit by several groups needs more rays
+/// than one lit by one. Measured with 4M rays instead of 1M on the scenes of 60k-70k receivers
+/// (16 per receiver at 1M): the generated classroom (16 groups) 2.40% -> 2.30% against a
+/// 16,384-spp path tracer, b90_office 4.28% (bias +1.42%) -> 3.88% (+0.62%) against 8,192 spp,
+/// for 0.4 s and 0.2 s more direct light. Scenes lit by one group keep the even spread.
+pub fn shadow_samples_for(receivers: usize, groups: usize) -> usize {
+    let receivers = receivers.max(1);
+    let per_group = MIN_SHADOW_SAMPLES * groups.clamp(1, GROUP_SAMPLE_GROUPS);
+    let floor = per_group.min(MAX_SHADOW_RAYS as usize / receivers);
+    let wanted = (SHADOW_RAY_BUDGET / receivers)
+        .max(floor)
+        .clamp(MIN_SHADOW_SAMPLES, MAX_SHADOW_SAMPLES);
     let k = wanted.isqrt();
     k * k
 }
@@ -188,7 +211,7 @@ pub struct DirectLight<'a> {
 impl<'a> DirectLight<'a> {
     /// Prepares the direct light of `patches` (unit frame, normalized emission, as
     /// [`crate::mesh::build_patches`] makes them) for `receivers` receiving elements (which sets
-    /// the shadow samples per element, see [`shadow_samples`]).
+    /// the shadow samples per element, see [`shadow_samples_for`]).
     pub fn new(patches: &'a Patches, receivers: usize) -> DirectLight<'a> {
         DirectLight::with_back_faces(patches, receivers, None)
     }
@@ -203,13 +226,15 @@ impl<'a> DirectLight<'a> {
     ) -> DirectLight<'a> {
         let back = |p: usize| back_faces.is_none_or(|b| b.get(p).copied().unwrap_or(false));
         let emitters = Emitters::new(patches, &back);
-        DirectLight {
+        let mut light = DirectLight {
             patches,
             groups: group_emitters(&emitters),
             emitters,
             rays: RayScene::new(&patches.corners, &patches.active),
-            samples: shadow_samples(receivers),
-        }
+            samples: 0,
+        };
+        light.samples = shadow_samples_for(receivers, light.groups.len());
+        light
     }
 
     /// Mean shadow samples per receiving element.
