@@ -10,6 +10,9 @@ use std::process::{Command, Output};
 use antiradiance::scene::Scene;
 use glam::DVec3;
 
+pub mod extremes;
+pub mod lamps;
+
 /// Runs the `antiradiance` binary with `args` and collects its output.
 pub fn run(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_antiradiance"))
