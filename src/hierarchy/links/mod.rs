@@ -274,13 +274,7 @@ pub fn refine(
 
     // Cluster links grouped by receiver node: the 8-byte keys sorted, then the links made.
     cluster.par_sort_unstable();
-    let mut cluster_start = vec![0u32; tree.nodes.len() + 1];
-    for &key in &cluster {
-        cluster_start[(key >> 32) as usize + 1] += 1;
-    }
-    for i in 0..tree.nodes.len() {
-        cluster_start[i + 1] += cluster_start[i];
-    }
+    let cluster_start = receiver_starts(&cluster, tree.nodes.len());
 
     // A leaf recorded in an exact pair may have been split afterwards (by another pair): the pair
     // then stands for all pairs of elements below its two nodes. Pairs as (receiver element,
@@ -323,6 +317,47 @@ pub fn refine(
         exact_start: vec![0u32; tree.elements.len() + 1],
         ..Links::default()
     };
+    append_exact_rows(
+        &mut links,
+        rows,
+        tree,
+        any_two_sided,
+        record_culled,
+        &mut stats,
+    );
+    if record_culled {
+        links.culled.extend(culled_pairs);
+    }
+    stats.assemble_seconds = t_coupled.elapsed().as_secs_f64();
+    links.stats = stats;
+    Ok(links)
+}
+
+/// Per node, where its incoming links start in `sorted` (cluster-link keys `receiver << 32 |
+/// sender`, sorted), with one entry more for the end.
+fn receiver_starts(sorted: &[u64], nodes: usize) -> Vec<u32> {
+    let mut start = vec![0u32; nodes + 1];
+    for &key in sorted {
+        start[(key >> 32) as usize + 1] += 1;
+    }
+    for i in 0..nodes {
+        start[i + 1] += start[i];
+    }
+    start
+}
+
+/// Appends the coupled exact rows (one per receiver element, in element order) to `links`:
+/// senders, entry ranges, faces (when some element is two-sided) and the per-element starts,
+/// counting what they hold in `stats`; with `record_culled`, the element pairs found to
+/// exchange nothing as culled pairs.
+fn append_exact_rows(
+    links: &mut Links,
+    rows: Vec<exact::Row>,
+    tree: &ClusterTree,
+    any_two_sided: bool,
+    record_culled: bool,
+    stats: &mut LinkStats,
+) {
     let n_exact: usize = rows.iter().map(|r| r.senders.len()).sum();
     let n_entries: usize = rows.iter().map(|r| r.entries.len()).sum();
     links.exact_sender.reserve_exact(n_exact);
@@ -356,12 +391,6 @@ pub fn refine(
     links
         .exact_entry_start
         .push(links.exact_entries.len() as u32);
-    if record_culled {
-        links.culled.extend(culled_pairs);
-    }
-    stats.assemble_seconds = t_coupled.elapsed().as_secs_f64();
-    links.stats = stats;
-    Ok(links)
 }
 
 /// Checks on a small scene that every ordered pair of distinct elements is covered exactly once
