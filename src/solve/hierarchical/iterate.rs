@@ -127,16 +127,12 @@ impl Prepared {
             (going_on, state_len_of::<C>(n + backs, slots)),
             (&mut convergence, &mut guard, &mut stats),
         );
-        let mut memory = self.memory.clone();
-        let (mut anderson, acceleration) =
-            self.acceleration::<C>(kept_anderson, going_on, &mut memory);
-        stats.acceleration = acceleration;
-        if anderson.is_some() {
-            convergence.contraction_bound = Some(rho_max);
-            if !going_on {
-                stats.extrapolations = 0;
-            }
-        }
+        let (mut anderson, memory) = self.accelerate::<C>(
+            kept_anderson,
+            going_on,
+            rho_max,
+            (&mut stats, &mut convergence),
+        );
         let (mut x_flat, mut g_flat) = (Vec::new(), Vec::new());
         let mut scratch = Scratch::new(self, std::mem::take(&mut intensity));
         let mut sources = Sources {
@@ -406,6 +402,29 @@ impl Prepared {
             .then(|| health::radiance_bound(source_max, rho_max));
         let guard = Guard::new(bound, reference_mass, patches.emission_scale);
         (bound, guard, rho_max)
+    }
+
+    /// The acceleration of one solve ([`Self::acceleration`]) and the memory figures with it:
+    /// records the choice in `stats`, and with Anderson mixing takes the largest albedo
+    /// `rho_max` as the contraction bound of `convergence` (restarting the extrapolation count
+    /// unless the solve goes on from a previous one).
+    fn accelerate<const C: usize>(
+        &self,
+        kept_anderson: Option<Anderson>,
+        going_on: bool,
+        rho_max: f64,
+        (stats, convergence): (&mut SolveStats, &mut Convergence),
+    ) -> (Option<Anderson>, MemoryStats) {
+        let mut memory = self.memory.clone();
+        let (anderson, acceleration) = self.acceleration::<C>(kept_anderson, going_on, &mut memory);
+        stats.acceleration = acceleration;
+        if anderson.is_some() {
+            convergence.contraction_bound = Some(rho_max);
+            if !going_on {
+                stats.extrapolations = 0;
+            }
+        }
+        (anderson, memory)
     }
 
     /// Anderson acceleration for a solve (`kept` the previous solve's history, reset to a new
