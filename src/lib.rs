@@ -69,6 +69,7 @@ pub mod reference;
 pub mod scene;
 pub mod solve;
 pub mod transport;
+pub mod union_find;
 
 pub use error::{Error, Result, Warning, WarningKind};
 pub use scene::{Scene, SceneOptions};

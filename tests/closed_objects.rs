@@ -3,7 +3,7 @@
 
 use antiradiance::mesh::build_patches;
 use antiradiance::progress::Progress;
-use antiradiance::scene::generated::occluder_scene;
+use antiradiance::scene::generated::{occluder_scene, push_cube};
 use antiradiance::scene::Scene;
 use antiradiance::solve::dense::solve_dense;
 use antiradiance::solve::solution::Solution;
@@ -17,28 +17,7 @@ const REVERSED: [usize; 4] = [1, 4, 7, 10];
 /// albedo 0.5, the last 12 of the scene); returns the scene and the box's first triangle.
 fn scene_with_box() -> (Scene, usize) {
     let mut scene = occluder_scene();
-    let first = scene.len();
-    let base = scene.positions.len() as u32;
-    for i in 0..8 {
-        let c = DVec3::new((i & 1) as f64, ((i >> 1) & 1) as f64, ((i >> 2) & 1) as f64);
-        scene.positions.push(DVec3::new(0.6, 0.0, 0.6) + c * 0.4);
-    }
-    let quads = [
-        [0, 2, 3, 1],
-        [4, 5, 7, 6],
-        [0, 1, 5, 4],
-        [2, 6, 7, 3],
-        [0, 4, 6, 2],
-        [1, 3, 7, 5],
-    ];
-    for q in quads {
-        for t in [[q[0], q[1], q[2]], [q[0], q[2], q[3]]] {
-            scene.triangles.push(t.map(|k| base + k));
-            scene.albedo.push([0.5; 3]);
-            scene.emission.push([0.0; 3]);
-            scene.material.push(None);
-        }
-    }
+    let first = push_cube(&mut scene, DVec3::new(0.6, 0.0, 0.6), 0.4, 0.5);
     (scene, first)
 }
 

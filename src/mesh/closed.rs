@@ -25,6 +25,7 @@ use glam::DVec3;
 
 use super::Patches;
 use crate::scene::lights::Light;
+use crate::union_find::UnionFind;
 
 /// Smallest `|volume| / area^1.5` of a closed object that is turned outward: below it the
 /// object is flat (two triangles back to back, a folded sheet) and has no inside to speak of.
@@ -192,7 +193,7 @@ fn edges_of(patches: &Patches) -> (Vec<[u32; 3]>, Vec<Edge>) {
 ///    directions).
 fn join(patches: &Patches, verts: &[[u32; 3]], edges: &[Edge]) -> (Vec<u32>, Vec<bool>, Vec<Join>) {
     let n = patches.len();
-    let mut parent: Vec<u32> = (0..n as u32).collect();
+    let mut sets = UnionFind::new(n);
     let mut open_edge = vec![false; n];
     let mut joins: Vec<Join> = Vec::new();
     let mut i = 0;
@@ -204,7 +205,7 @@ fn join(patches: &Patches, verts: &[[u32; 3]], edges: &[Edge]) -> (Vec<u32>, Vec
         if j - i == 2 {
             let ((_, p, dp), (_, q, dq)) = (edges[i], edges[i + 1]);
             joins.push((p, q, dp != dq));
-            union(&mut parent, p, q);
+            sets.union(p as usize, q as usize);
         } else {
             for e in &edges[i..j] {
                 open_edge[e.1 as usize] = true;
@@ -212,15 +213,14 @@ fn join(patches: &Patches, verts: &[[u32; 3]], edges: &[Edge]) -> (Vec<u32>, Vec
         }
         i = j;
     }
-    let root: Vec<u32> = (0..n as u32).map(|p| find(&mut parent, p)).collect();
+    let root: Vec<u32> = (0..n).map(|p| sets.find(p) as u32).collect();
     let mut open = vec![false; n];
     // Per object: 1 when some patch is one-sided, 2 when some is two-sided.
     let mut sides = vec![0u8; n];
     for p in 0..n {
         let r = root[p] as usize;
-        let emits = patches.emission[p].iter().any(|&e| e != 0.0);
         sides[r] |= if patches.is_two_sided(p) { 2 } else { 1 };
-        if verts[p][0] == u32::MAX || open_edge[p] || emits {
+        if verts[p][0] == u32::MAX || open_edge[p] || patches.is_emitter(p) {
             open[r] = true;
         }
     }
@@ -289,7 +289,7 @@ fn outward_if_dark(patches: &Patches, flip: &[Option<bool>], closed: &[&Vec<u32>
         objects: 0,
     };
     let emitters: Vec<(DVec3, DVec3)> = (0..n)
-        .filter(|&p| patches.active[p] && patches.emission[p].iter().any(|&e| e != 0.0))
+        .filter(|&p| patches.active[p] && patches.is_emitter(p))
         .map(|p| bounds_of(&patches.corners[p]))
         .collect();
     let lamps: Vec<DVec3> = patches
@@ -351,56 +351,15 @@ fn bounds_of(t: &[DVec3; 3]) -> (DVec3, DVec3) {
     (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]))
 }
 
-fn find(parent: &mut [u32], mut x: u32) -> u32 {
-    while parent[x as usize] != x {
-        parent[x as usize] = parent[parent[x as usize] as usize];
-        x = parent[x as usize];
-    }
-    x
-}
-
-fn union(parent: &mut [u32], a: u32, b: u32) {
-    let (ra, rb) = (find(parent, a), find(parent, b));
-    if ra != rb {
-        parent[ra.max(rb) as usize] = ra.min(rb);
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::scene::Scene;
 
-    /// A unit cube at `at` (12 triangles facing out), as scene triangles.
-    fn cube(scene: &mut Scene, at: DVec3, size: f64) {
-        let base = scene.positions.len() as u32;
-        for i in 0..8 {
-            let c = DVec3::new((i & 1) as f64, ((i >> 1) & 1) as f64, ((i >> 2) & 1) as f64);
-            scene.positions.push(at + c * size);
-        }
-        // Quads (counter-clockwise from outside).
-        let quads = [
-            [0, 2, 3, 1],
-            [4, 5, 7, 6],
-            [0, 1, 5, 4],
-            [2, 6, 7, 3],
-            [0, 4, 6, 2],
-            [1, 3, 7, 5],
-        ];
-        for q in quads {
-            for t in [[q[0], q[1], q[2]], [q[0], q[2], q[3]]] {
-                scene.triangles.push(t.map(|k| base + k));
-                scene.albedo.push([0.5; 3]);
-                scene.emission.push([0.0; 3]);
-                scene.material.push(None);
-            }
-        }
-    }
-
     /// A cube standing in a large emitting quad's light, far from it.
     fn scene_with_cube() -> Scene {
         let mut scene = Scene::default();
-        cube(&mut scene, DVec3::ZERO, 1.0);
+        crate::scene::generated::push_cube(&mut scene, DVec3::ZERO, 1.0, 0.5);
         let base = scene.positions.len() as u32;
         for p in [
             [-5.0, 4.0, -5.0],

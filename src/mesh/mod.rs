@@ -102,6 +102,11 @@ impl Patches {
         self.active[p] && self.two_sided.get(p).copied().unwrap_or(false)
     }
 
+    /// True when patch `p` emits in some channel (its normalized emission is above 0).
+    pub fn is_emitter(&self, p: usize) -> bool {
+        self.emission[p].iter().any(|&e| e > 0.0)
+    }
+
     /// True when some active patch is two-sided.
     pub fn has_two_sided(&self) -> bool {
         (0..self.len()).any(|p| self.is_two_sided(p))

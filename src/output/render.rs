@@ -202,10 +202,6 @@ fn exposure_from(samples: &[(f64, f64)]) -> Option<f64> {
     (p95 > 0.0).then(|| AUTO_EXPOSURE_TARGET / p95)
 }
 
-fn is_emissive(patches: &Patches, p: usize) -> bool {
-    patches.emission[p].iter().any(|&e| e > 0.0)
-}
-
 fn patch_b(solution: &Solution, p: usize) -> [f64; 3] {
     solution
         .patch_radiance
@@ -223,7 +219,7 @@ fn patch_b(solution: &Solution, p: usize) -> [f64; 3] {
 pub fn auto_exposure(patches: &Patches, solution: &Solution) -> f64 {
     let collect = |emissive: bool| -> Vec<(f64, f64)> {
         (0..patches.len())
-            .filter(|&p| patches.active[p] && is_emissive(patches, p) == emissive)
+            .filter(|&p| patches.active[p] && patches.is_emitter(p) == emissive)
             .map(|p| (luminance(patch_b(solution, p)), patches.area[p]))
             .collect()
     };
@@ -265,7 +261,7 @@ pub(crate) fn weld(patches: &Patches, solution: &Solution) -> Welded {
     for p in 0..patches.len() {
         let b = patch_b(solution, p);
         let a = sanitize(patches.area[p]).max(0.0);
-        let em = is_emissive(patches, p);
+        let em = patches.is_emitter(p);
         let n = patches.normal[p];
         let mut face = [0u32; 3];
         for (k, &c) in patches.corners[p].iter().enumerate() {
@@ -742,7 +738,7 @@ fn frame_exposure(patches: &Patches, frame: &Frame) -> f64 {
             .filter(|&i| {
                 frame.patch[i] != NO_PATCH
                     && frame.front[i]
-                    && is_emissive(patches, frame.patch[i] as usize) == emissive
+                    && patches.is_emitter(frame.patch[i] as usize) == emissive
             })
             .map(|i| (luminance(frame.radiance[i]), 1.0))
             .collect()

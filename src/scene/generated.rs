@@ -314,6 +314,35 @@ fn block(b: &mut Builder, top: [DVec3; 4], sides: [(usize, usize); 4], albedo: [
     }
 }
 
+/// Appends an axis-aligned cube to `scene`: corner `at`, edge `size`, 8 shared vertices and 12
+/// triangles facing out, two per face in the order -z, +z, -y, +y, -x, +x, of grey albedo
+/// `albedo`, no emission and no material. Returns the index of its first triangle.
+pub fn push_cube(scene: &mut Scene, at: DVec3, size: f64, albedo: f64) -> usize {
+    let (first, base) = (scene.len(), scene.positions.len() as u32);
+    for i in 0..8 {
+        let c = v((i & 1) as f64, ((i >> 1) & 1) as f64, ((i >> 2) & 1) as f64);
+        scene.positions.push(at + c * size);
+    }
+    // Quads counter-clockwise seen from outside.
+    let quads = [
+        [0, 2, 3, 1],
+        [4, 5, 7, 6],
+        [0, 1, 5, 4],
+        [2, 6, 7, 3],
+        [0, 4, 6, 2],
+        [1, 3, 7, 5],
+    ];
+    for q in quads {
+        for t in [[q[0], q[1], q[2]], [q[0], q[2], q[3]]] {
+            scene.triangles.push(t.map(|k| base + k));
+            scene.albedo.push([albedo; 3]);
+            scene.emission.push([0.0; 3]);
+            scene.material.push(None);
+        }
+    }
+    first
+}
+
 /// Floor cells per side in [`occluder_scene`].
 pub const OCCLUDER_FLOOR_CELLS: usize = 12;
 

@@ -7,41 +7,7 @@ use crate::scene::Scene;
 use glam::{DVec2, DVec3};
 use std::collections::HashMap;
 
-/// Disjoint sets over `0..n`.
-pub(super) struct UnionFind(Vec<usize>);
-
-impl UnionFind {
-    pub(super) fn new(n: usize) -> UnionFind {
-        UnionFind((0..n).collect())
-    }
-    pub(super) fn find(&mut self, mut x: usize) -> usize {
-        while self.0[x] != x {
-            self.0[x] = self.0[self.0[x]];
-            x = self.0[x];
-        }
-        x
-    }
-    pub(super) fn union(&mut self, a: usize, b: usize) {
-        let (ra, rb) = (self.find(a), self.find(b));
-        if ra != rb {
-            self.0[ra.max(rb)] = ra.min(rb);
-        }
-    }
-    /// The sets, each sorted, in order of their smallest member.
-    pub(super) fn groups(&mut self, members: impl Iterator<Item = usize>) -> Vec<Vec<usize>> {
-        let mut index: HashMap<usize, usize> = HashMap::new();
-        let mut groups: Vec<Vec<usize>> = Vec::new();
-        for x in members {
-            let r = self.find(x);
-            let g = *index.entry(r).or_insert_with(|| {
-                groups.push(Vec::new());
-                groups.len() - 1
-            });
-            groups[g].push(x);
-        }
-        groups
-    }
-}
+use crate::union_find::UnionFind;
 
 /// The same material: index, albedo and emission bit for bit.
 pub(super) fn same_material(scene: &Scene, a: usize, b: usize) -> bool {
