@@ -42,8 +42,9 @@ pub struct LinkParams {
     /// Largest share of the scene's transport a link may carry and still be accepted when it
     /// is geometrically too coarse: `min(A_r * omega_s, A_s * omega_r) / (pi * A_scene)`, both
     /// solid angles bounded from above (by the nodes' bounding spheres and by their bounds, so
-    /// that thin clusters such as chair legs count what they subtend), is the link's form-factor flux `A_r F_rs` (the light
-    /// it carries in a scene of uniform radiance) over the scene's area. Hierarchical
+    /// that thin clusters such as chair legs count what they subtend), is the link's
+    /// form-factor flux `A_r F_rs` (the light it carries in a scene of uniform radiance) over
+    /// the scene's area. Hierarchical
     /// radiosity's BFA rule with uniform radiance: the error of a coarse link is at most the
     /// light it carries, and small receivers (furniture, slivers, a fan of pieces) carry little.
     /// It does not depend on the triangulation: splitting a triangle splits its links' shares.

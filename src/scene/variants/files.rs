@@ -22,9 +22,8 @@ use std::path::Path;
 /// which re-applied to the variant's own triangles would select others: a wall's sliver with
 /// its three corners above the line), every emitting triangle is written with a material of
 /// its own emission (`Ke`) and, when it has a material, albedo (`Kd`), named `emitter_N`,
-/// appended to the MTL file (and
-/// a triangle without a material after one gets `no_material`, which has no `Kd`): the
-/// variant then solves with the input's emitters and no rule.
+/// appended to the MTL file (and a triangle without a material after one gets `no_material`,
+/// which has no `Kd`): the variant then solves with the input's emitters and no rule.
 ///
 /// Each file is written atomically, the MTL and map files first; on failure the files this
 /// call created are removed again.
@@ -77,28 +76,25 @@ pub fn write_variant(
     for p in &scene.positions {
         let _ = writeln!(obj, "v {} {} {}", p.x, p.y, p.z);
     }
-    // Materials as (scene material, emitter material); an emitter material wins.
-    let mut current: Option<(Option<u32>, Option<usize>)> = None;
+    // Each triangle's material name: its emitter material's, else its own, else (after an
+    // emitter material) `no_material`.
+    let emitter_names: Vec<String> = (0..emitters).map(|i| format!("emitter_{i}")).collect();
+    let mut current: Option<&str> = None;
     for (t, f) in scene.triangles.iter().enumerate() {
-        let m = (material_of(scene, t), emitter_of[t]);
-        if current != Some(m) && (m.0.is_some() || m.1.is_some() || current.is_some()) {
-            match m {
-                (_, Some(e)) => {
-                    let _ = writeln!(obj, "usemtl emitter_{e}");
-                }
-                (Some(m), None) => {
-                    let _ = writeln!(obj, "usemtl {}", scene.material_names[m as usize]);
-                }
-                (None, None) if emitters > 0 => {
-                    let _ = writeln!(obj, "usemtl no_material");
-                }
-                (None, None) => {
-                    return Err(Error::Parameter(format!(
-                        "variant: triangle {t} has no material after triangles that have one"
-                    )));
-                }
-            }
-            current = Some(m);
+        let name = match (emitter_of[t], material_of(scene, t)) {
+            (Some(e), _) => Some(emitter_names[e].as_str()),
+            (None, Some(m)) => Some(scene.material_names[m as usize].as_str()),
+            (None, None) if emitters > 0 && current.is_some() => Some("no_material"),
+            (None, None) => None,
+        };
+        if name != current {
+            let Some(name) = name else {
+                return Err(Error::Parameter(format!(
+                    "variant: triangle {t} has no material after triangles that have one"
+                )));
+            };
+            let _ = writeln!(obj, "usemtl {name}");
+            current = Some(name);
         }
         let _ = writeln!(obj, "f {} {} {}", f[0] + 1, f[1] + 1, f[2] + 1);
     }

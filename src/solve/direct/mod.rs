@@ -182,10 +182,10 @@ pub fn shadow_samples(receivers: usize) -> usize {
 ///
 /// Each group takes the visible fraction of its own samples (a ratio estimator whose bias and
 /// noise fall as 1 / samples per group), so a receiver lit by several groups needs more rays
-/// than one lit by one. Measured with 4M rays instead of 1M on the scenes of 60k-70k receivers
-/// (16 per receiver at 1M): the generated classroom (16 groups) 2.40% -> 2.30% against a
-/// 16,384-spp path tracer, b90_office 4.28% (bias +1.42%) -> 3.88% (+0.62%) against 8,192 spp,
-/// for 0.4 s and 0.2 s more direct light. Scenes lit by one group keep the even spread.
+/// than one lit by one. On the scenes of 60k-70k receivers (16 per receiver from the budget
+/// alone): the generated classroom (16 groups) 2.40% -> 2.30% against a 16,384-spp path
+/// tracer, b90_office 4.28% (bias +1.42%) -> 3.83% (+0.51%) against 8,192 spp, for 0.4 s and
+/// 0.3 s more direct light. Scenes lit by one group keep the even spread.
 pub fn shadow_samples_for(receivers: usize, groups: usize) -> usize {
     let receivers = receivers.max(1);
     let per_group = MIN_SHADOW_SAMPLES * groups.clamp(1, GROUP_SAMPLE_GROUPS);
