@@ -464,6 +464,49 @@ pub fn bisect(tri: &Tri) -> [Tri; 2] {
     [[a, m, c], [m, b, c]]
 }
 
+/// Shortest edge over middle edge below which [`split_in_pieces`] cuts a triangle across its
+/// two long edges instead of bisecting it twice: a sliver whose two long edges meet at a far
+/// corner (a fan's piece) then loses half its length in three pieces per split, and the pieces
+/// beside its short edge become well shaped, where bisection keeps its shape in four.
+pub const SLIVER_EDGE_RATIO: f64 = 0.5;
+
+/// The pieces a leaf triangle is split into, with `tri`'s orientation, each at most half as
+/// long as `tri` (longest edge): a sliver (shortest edge under [`SLIVER_EDGE_RATIO`] times the
+/// middle one) in three, cut across its two long edges at their midpoints (the corner piece
+/// similar to `tri`, and the quadrilateral beside the short edge by its shorter diagonal: two
+/// pieces half as long and about as wide, so repeated splits end in well-shaped pieces); any
+/// other triangle in four, by bisecting across its longest edge twice ([`bisect`]). Ties
+/// within [`SCENE_EPS`] are broken in corner order, so float noise in the corners does not
+/// change the cut.
+pub fn split_in_pieces(tri: &Tri) -> ([Tri; 4], usize) {
+    let len = |k: usize| (tri[(k + 1) % 3] - tri[k]).length();
+    let lens = [len(0), len(1), len(2)];
+    // Edge k joins corners k and k + 1; the shortest edge (first within SCENE_EPS) is opposite
+    // the apex where the two long edges meet.
+    let mut short = 0;
+    for k in 1..3 {
+        if lens[k] < lens[short] - SCENE_EPS {
+            short = k;
+        }
+    }
+    let middle = lens[(short + 1) % 3].min(lens[(short + 2) % 3]);
+    if lens[short] < SLIVER_EDGE_RATIO * middle {
+        // Apex a opposite the short edge b c, in tri's cyclic order a, b, c.
+        let (b, c, a) = (tri[short], tri[(short + 1) % 3], tri[(short + 2) % 3]);
+        let (m, n) = (0.5 * (a + b), 0.5 * (a + c));
+        // The quadrilateral m b c n, cut by its shorter diagonal (m c unless b n is shorter).
+        let quad = if (b - n).length() < (m - c).length() - SCENE_EPS {
+            [[m, b, n], [b, c, n]]
+        } else {
+            [[m, b, c], [m, c, n]]
+        };
+        return ([[a, m, n], quad[0], quad[1], [a, a, a]], 3);
+    }
+    let [h0, h1] = bisect(tri);
+    let ([p0, p1], [p2, p3]) = (bisect(&h0), bisect(&h1));
+    ([p0, p1, p2, p3], 4)
+}
+
 /// The `m * m` congruent sub-triangles of `tri` (uniform midpoint-style subdivision), in a fixed
 /// order. `m >= 1`.
 pub fn subdivide(tri: &Tri, m: usize) -> impl Iterator<Item = Tri> + '_ {
@@ -498,6 +541,71 @@ mod tests {
                 assert!((normal(p).unwrap() - n).length() < 1e-9, "orientation kept");
             }
         }
+    }
+
+    /// Longest edge squared over area.
+    fn aspect(t: &Tri) -> f64 {
+        let l = (t[1] - t[0])
+            .length()
+            .max((t[2] - t[1]).length())
+            .max((t[0] - t[2]).length());
+        l * l / area(t)
+    }
+
+    fn longest(t: &Tri) -> f64 {
+        (t[1] - t[0])
+            .length()
+            .max((t[2] - t[1]).length())
+            .max((t[0] - t[2]).length())
+    }
+
+    #[test]
+    fn split_in_pieces_halves_slivers_and_their_aspect() {
+        // A fan's sliver: the apex far away, a short base (aspect 200), in every corner order.
+        let (a, b, c) = (
+            DVec3::ZERO,
+            DVec3::new(10.0, 0.0, 0.0),
+            DVec3::new(10.0, 0.1, 0.0),
+        );
+        for tri in [[a, b, c], [b, c, a], [c, a, b]] {
+            let (pieces, count) = split_in_pieces(&tri);
+            assert_eq!(count, 3, "a sliver is cut across, in three");
+            let pieces = &pieces[..count];
+            let total: f64 = pieces.iter().map(area).sum();
+            assert!((total - area(&tri)).abs() < 1e-12 * area(&tri));
+            let n = normal(&tri).unwrap();
+            for p in pieces {
+                assert!((normal(p).unwrap() - n).length() < 1e-9, "orientation kept");
+                assert!(longest(p) <= 0.5 * longest(&tri) + 1e-9, "half as long");
+            }
+            // The corner piece is the sliver at half scale; the two pieces beside the base are
+            // half as long and about as wide (aspect ratios of 1/2 and 1 of the sliver's).
+            let mut aspects: Vec<f64> = pieces.iter().map(aspect).collect();
+            aspects.sort_by(f64::total_cmp);
+            assert!(aspects[0] <= 0.55 * aspect(&tri), "{aspects:?}");
+            assert!(aspects[2] <= aspect(&tri) * (1.0 + 1e-6), "{aspects:?}");
+        }
+        // Repeated splits of the pieces beside the base end in well-shaped triangles.
+        let mut tri = [a, b, c];
+        for _ in 0..8 {
+            let (pieces, count) = split_in_pieces(&tri);
+            tri = pieces[..count]
+                .iter()
+                .copied()
+                .min_by(|p, q| aspect(p).total_cmp(&aspect(q)))
+                .unwrap();
+        }
+        assert!(aspect(&tri) < 8.0, "{}", aspect(&tri));
+    }
+
+    #[test]
+    fn split_in_pieces_bisects_well_shaped_triangles_in_four() {
+        let tri = [DVec3::ZERO, DVec3::X * 2.0, DVec3::new(0.3, 1.7, 0.2)];
+        let (pieces, count) = split_in_pieces(&tri);
+        assert_eq!(count, 4);
+        let [h0, h1] = bisect(&tri);
+        let want: Vec<Tri> = bisect(&h0).into_iter().chain(bisect(&h1)).collect();
+        assert_eq!(&pieces[..4], &want[..]);
     }
 
     #[test]

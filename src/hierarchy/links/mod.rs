@@ -27,8 +27,9 @@ pub struct LinkParams {
     /// bear's graded mesh into twice its triangles for no measurable accuracy: 5.1M links,
     /// error 6.19%; 0.02: 3.25M links, same error, same room and Cornell box errors).
     pub min_radius: f64,
-    /// Most times one patch may be split in four (two rounds of longest-edge bisection). 0..6;
-    /// 4 by default (256 pieces).
+    /// Most times one patch may be split ([`crate::hierarchy::ClusterTree::split_leaf`]: in
+    /// four, a sliver in three; each split halves the pieces' length). 0..6; 4 by default (at
+    /// most 256 pieces).
     pub max_split_depth: u8,
     /// How much larger than the sender's the receiver's solid angle may be: receivers evaluate a
     /// link with each element's own direction and distance, so their extent costs little
