@@ -48,14 +48,9 @@ pub fn solve_dense(
     options: &SolverOptions,
     progress: &Progress,
 ) -> Result<Solution> {
-    if patches.has_two_sided() {
-        // The oracle solves two-sided patches as the back-to-back pairs of one-sided patches
-        // they are equivalent to (each pair's faces cover each other's backs).
-        let (expanded, back_of) = patches.with_back_faces();
-        let solution = solve_one_sided(&expanded, options, progress)?;
-        return Ok(solution.fold_back_faces(patches, &back_of));
-    }
-    solve_one_sided(patches, options, progress)
+    // The oracle solves two-sided patches as the back-to-back pairs of one-sided patches they
+    // are equivalent to.
+    Solution::of_one_sided_faces(patches, |p| solve_one_sided(p, options, progress))
 }
 
 /// [`solve_dense`] of patches that are all one-sided.

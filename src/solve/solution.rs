@@ -2,6 +2,7 @@
 
 use serde::Serialize;
 
+use crate::error::Result;
 pub use crate::files::sanitize;
 use crate::mesh::Patches;
 use crate::solve::health::{self, FailureKind, SolveFailure};
@@ -229,6 +230,23 @@ impl Solution {
             solution.settle_inactive(patches);
         }
         solution
+    }
+
+    /// The solution of `patches` by `solve_one_sided`, a solver of one-sided patches: when
+    /// `patches` has two-sided patches, they are solved as the back-to-back pairs of one-sided
+    /// patches they are equivalent to (each pair's faces cover each other's backs,
+    /// [`Patches::with_back_faces`]) and the result is folded back
+    /// ([`Solution::fold_back_faces`]).
+    pub fn of_one_sided_faces(
+        patches: &Patches,
+        solve_one_sided: impl FnOnce(&Patches) -> Result<Solution>,
+    ) -> Result<Solution> {
+        if patches.has_two_sided() {
+            let (expanded, back_of) = patches.with_back_faces();
+            let solution = solve_one_sided(&expanded)?;
+            return Ok(solution.fold_back_faces(patches, &back_of));
+        }
+        solve_one_sided(patches)
     }
 
     /// The solution of `patches` from that of [`Patches::with_back_faces`]: the first
