@@ -479,7 +479,8 @@ where
     }
 }
 
-/// Conversion back from f64 for [`damp`] (radiance is f64, antiradiance f32).
+/// Conversion back from f64 for [`damp`] and the extrapolation of the hierarchical sweeps
+/// (radiance is f64, antiradiance f32).
 pub trait FromF64 {
     /// The value nearest `x`.
     fn from_f64(x: f64) -> Self;
