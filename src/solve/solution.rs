@@ -4,6 +4,7 @@ use serde::Serialize;
 
 use crate::error::Result;
 pub use crate::files::sanitize;
+use crate::mesh::closed::Outward;
 use crate::mesh::Patches;
 use crate::solve::health::{self, FailureKind, SolveFailure};
 
@@ -230,6 +231,25 @@ impl Solution {
             solution.settle_inactive(patches);
         }
         solution
+    }
+
+    /// Puts back the faces of this solution, solved on the patches
+    /// [`Patches::closed_objects_outward`] made from `patches` (what changed: `outward`): a
+    /// turned two-sided patch's solved front is its back face, and its front (inside) has the
+    /// dark inside's radiance, its emission 0; every other patch of `patches` with two faces
+    /// keeps what was solved (0 behind for the objects' patches made one-sided). Call before
+    /// [`Solution::settle_inactive`], which remakes the per-triangle values.
+    pub fn restore_outward(&mut self, outward: &Outward, patches: &Patches) {
+        if !patches.has_two_sided() {
+            return;
+        }
+        self.patch_radiance_back
+            .resize(self.patch_radiance.len(), [0.0; 3]);
+        for &p in &outward.turned_two_sided {
+            let p = p as usize;
+            self.patch_radiance_back[p] = self.patch_radiance[p];
+            self.patch_radiance[p] = [0.0; 3];
+        }
     }
 
     /// The solution of `patches` by `solve_one_sided`, a solver of one-sided patches: when
