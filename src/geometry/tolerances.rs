@@ -91,6 +91,13 @@ pub const UNIT_NORMAL_SLACK: f64 = 1e-9;
 /// finer than exported-file noise would call a closed box with a jittered corner non-convex.
 pub const CONVEX_TOLERANCE: f64 = 1e-7;
 
+/// Largest contraction ratio (dimensionless) the convergence estimate and the radiance bounds
+/// take: a ratio of successive residuals, or the largest albedo, is capped here so that
+/// `1 / (1 - q)` stays finite (at most 1e4). Albedos are at most [`crate::scene::ALBEDO_MAX`]
+/// (0.99), so the cap never binds on a bound; it binds only on a residual ratio at or above 1
+/// (a sweep that did not contract).
+pub const MAX_CONTRACTION: f64 = 0.9999;
+
 /// A colour is grey when its channels agree to this relative amount (dimensionless): exact up
 /// to the rounding of reading the same number three times.
 pub const GREY_RELATIVE: f64 = 1e-12;

@@ -203,11 +203,11 @@ fn sweep_guard(
 ) -> (Guard, f64) {
     let (source_max, rho_max) = source_and_albedo_max(patches);
     let bound = health::radiance_bound(source_max, rho_max);
-    let reference_mass: f64 = active
+    let emitted: f64 = active
         .iter()
         .map(|&p| patches.area[p] * emission[p].iter().map(|x| x.abs()).sum::<f64>())
-        .sum::<f64>()
-        / (1.0 - rho_max.clamp(0.0, 0.9999));
+        .sum();
+    let reference_mass = health::geometric_sum(emitted, rho_max);
     let guard = Guard::new(
         options.antiradiance.then_some(bound),
         reference_mass,
