@@ -22,6 +22,7 @@ use std::collections::HashMap;
 use std::path::Path;
 
 use crate::error::{Warning, WarningKind};
+use crate::scene::obj;
 
 /// Footprints (texel-space area) below this, with linear magnification, are averaged by
 /// bilinear samples.
@@ -497,22 +498,8 @@ fn parse_map(dir: &Path, args: &[&str]) -> Option<MapRef> {
 fn obj_material_textures(obj_path: &Path, obj_text: &str) -> HashMap<String, MtlTextures> {
     let base = obj_path.parent().unwrap_or(Path::new("."));
     let mut out: HashMap<String, MtlTextures> = HashMap::new();
-    for raw in obj_text.lines() {
-        let line = raw.split('#').next().unwrap_or("").trim();
-        let Some(name) = line.strip_prefix("mtllib") else {
-            continue;
-        };
-        if !name.starts_with(char::is_whitespace) {
-            continue;
-        }
-        let name = name.trim();
-        let whole = base.join(name);
-        let names: Vec<&str> = if whole.is_file() || !name.contains(char::is_whitespace) {
-            vec![name]
-        } else {
-            name.split_whitespace().collect()
-        };
-        for name in names {
+    for argument in obj_text.lines().filter_map(obj::mtllib_argument) {
+        for name in obj::mtllib_names(base, argument) {
             let mtl_path = base.join(name);
             let Ok(text) = std::fs::read_to_string(&mtl_path) else {
                 continue; // the scene loader already warned
