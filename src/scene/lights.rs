@@ -27,6 +27,7 @@ use std::f64::consts::PI;
 use glam::DVec3;
 
 use crate::error::{Error, Result};
+use crate::geometry::tolerances::{CONE_ANGLE_SLACK, MIN_LIGHT_DIRECTION, SPOT_MIN_COS_SPAN};
 
 /// The luminous efficacy used to turn glTF's photometric units into radiometric ones, for every
 /// light kind and for emissive materials alike: 683 lm / W (the peak of the photopic curve,
@@ -80,7 +81,7 @@ impl Light {
     /// range. `what` names the light in the message.
     pub fn validate(&self, what: &str) -> Result<()> {
         let bad = |m: String| Err(Error::Parameter(format!("{what}: {m}")));
-        let dir_ok = |d: DVec3| d.is_finite() && d.length() > 1e-12;
+        let dir_ok = |d: DVec3| d.is_finite() && d.length() > MIN_LIGHT_DIRECTION;
         match *self {
             Light::Point {
                 position,
@@ -109,7 +110,11 @@ impl Light {
                 if !finite_rgb(intensity) {
                     return bad("intensity must be finite and >= 0".into());
                 }
-                if !(outer > 0.0 && outer <= PI / 2.0 + 1e-9 && inner >= 0.0 && inner < outer) {
+                if !(outer > 0.0
+                    && outer <= PI / 2.0 + CONE_ANGLE_SLACK
+                    && inner >= 0.0
+                    && inner < outer)
+                {
                     return bad(format!(
                         "cone angles inner {:.6} and outer {:.6} degrees need 0 <= inner < outer <= 90",
                         inner.to_degrees(),
@@ -213,7 +218,7 @@ fn towards_point(x: DVec3, position: DVec3) -> Option<(DVec3, f64, f64)> {
 /// outside the outer one, `t^2` between, `t` linear in the cosine (KHR_lights_punctual).
 pub fn spot_falloff(cos_angle: f64, inner: f64, outer: f64) -> f64 {
     let (ci, co) = (inner.cos(), outer.cos());
-    let t = ((cos_angle - co) / (ci - co).max(1e-3)).clamp(0.0, 1.0);
+    let t = ((cos_angle - co) / (ci - co).max(SPOT_MIN_COS_SPAN)).clamp(0.0, 1.0);
     t * t
 }
 

@@ -22,6 +22,7 @@ use std::collections::HashMap;
 use std::path::Path;
 
 use crate::error::{Warning, WarningKind};
+use crate::geometry::tolerances::MIN_UV_AREA;
 use crate::scene::obj;
 
 /// Footprints (texel-space area) below this, with linear magnification, are averaged by
@@ -218,7 +219,7 @@ impl Texture {
         });
         let cells =
             ((hi[0] - lo[0]).max(1.0) as u64).saturating_mul((hi[1] - lo[1]).max(1.0) as u64);
-        if !(area > 1e-12) {
+        if !(area > MIN_UV_AREA) {
             let c = [0, 1].map(|k| (p[0][k] + p[1][k] + p[2][k]) / 3.0);
             return self.sample(c[0], c[1], s);
         }
