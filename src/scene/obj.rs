@@ -3,6 +3,7 @@
 //! tobj for the faces and materials.
 
 use crate::error::{Error, Result, Warning, WarningKind};
+use crate::scene::mtllib;
 use crate::scene::*;
 use glam::DVec3;
 use std::path::Path;
@@ -139,24 +140,6 @@ pub fn load_obj(path: &Path, options: &SceneOptions) -> Result<Scene> {
     Ok(scene)
 }
 
-/// The file names one `mtllib` statement's argument names, relative to `dir`: `mtllib a.mtl
-/// b.mtl` names several files, unless a file of that whole name exists.
-pub(crate) fn mtllib_names<'a>(dir: &Path, argument: &'a str) -> Vec<&'a str> {
-    if dir.join(argument).is_file() || !argument.contains(char::is_whitespace) {
-        vec![argument]
-    } else {
-        argument.split_whitespace().collect()
-    }
-}
-
-/// The argument of an OBJ line if it is an `mtllib` statement (comment and surrounding blanks
-/// removed), else `None`. [`mtllib_names`] splits it into file names.
-pub(crate) fn mtllib_argument(raw: &str) -> Option<&str> {
-    let line = raw.split('#').next().unwrap_or("").trim();
-    let rest = line.strip_prefix("mtllib")?;
-    rest.starts_with(char::is_whitespace).then(|| rest.trim())
-}
-
 /// The material step of [`load_obj`]: every MTL file the OBJ names, checked line by line
 /// first (tobj panics on short colour lines) and reduced to the lines we use (tobj drops a
 /// whole file over one line it cannot parse); missing files and undefined materials become
@@ -171,7 +154,7 @@ fn read_materials(
     let mut defined: std::collections::HashSet<String> = Default::default();
     let mut mtl_missing = false;
     for (line, name) in &obj_scan.mtllibs {
-        for name in mtllib_names(base_dir, name) {
+        for name in mtllib::names(base_dir, name) {
             let mtl_path = base_dir.join(name);
             match std::fs::read(&mtl_path) {
                 Ok(mtl_bytes) => {

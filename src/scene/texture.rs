@@ -23,7 +23,7 @@ use std::path::Path;
 
 use crate::error::{Warning, WarningKind};
 use crate::geometry::tolerances::MIN_UV_AREA;
-use crate::scene::obj;
+use crate::scene::mtllib;
 
 /// Footprints (texel-space area) below this, with linear magnification, are averaged by
 /// bilinear samples.
@@ -499,8 +499,8 @@ fn parse_map(dir: &Path, args: &[&str]) -> Option<MapRef> {
 fn obj_material_textures(obj_path: &Path, obj_text: &str) -> HashMap<String, MtlTextures> {
     let base = obj_path.parent().unwrap_or(Path::new("."));
     let mut out: HashMap<String, MtlTextures> = HashMap::new();
-    for argument in obj_text.lines().filter_map(obj::mtllib_argument) {
-        for name in obj::mtllib_names(base, argument) {
+    for argument in obj_text.lines().filter_map(mtllib::argument) {
+        for name in mtllib::names(base, argument) {
             let mtl_path = base.join(name);
             let Ok(text) = std::fs::read_to_string(&mtl_path) else {
                 continue; // the scene loader already warned

@@ -4,7 +4,7 @@
 use super::*;
 use crate::error::{Error, Result};
 use crate::files::{format_f64, write_atomic};
-use crate::scene::obj;
+use crate::scene::mtllib;
 use std::fmt::Write as _;
 use std::io::Write as _;
 use std::path::Path;
@@ -286,9 +286,9 @@ pub fn material_files(obj_path: &Path) -> Result<Vec<PathBuf>> {
     let text = std::fs::read_to_string(obj_path).map_err(|e| Error::io(obj_path, e))?;
     let dir = obj_path.parent().unwrap_or(Path::new("."));
     let mut files = Vec::new();
-    for argument in text.lines().filter_map(obj::mtllib_argument) {
+    for argument in text.lines().filter_map(mtllib::argument) {
         files.extend(
-            obj::mtllib_names(dir, argument)
+            mtllib::names(dir, argument)
                 .into_iter()
                 .map(|n| dir.join(n))
                 .filter(|p| p.is_file()),
