@@ -174,10 +174,10 @@ pub struct Solution {
 impl SolveStats {
     /// `Ok` unless the solve failed its health checks ([`SolveStats::failure`]); then an
     /// [`crate::Error::Solve`] naming `solver` and what failed, where and by how much.
-    pub fn check(&self, solver: &str) -> crate::Result<()> {
+    pub fn check(&self, solver: &str) -> Result<()> {
         match &self.failure {
             None => Ok(()),
-            Some(f) => Err(crate::Error::Solve(format!(
+            Some(f) => Err(crate::error::Error::Solve(format!(
                 "the {solver} solver failed: {f}"
             ))),
         }
