@@ -42,7 +42,6 @@ pub const RAY_EPS: f64 = 1e-6;
 ///
 /// Relative to the triangle's own edges, so it does not depend on the scene's scale: a sliver with
 /// aspect ratio 1e6 (sin ~ 1e-6) is a real triangle, three collinear points (sin ~ 1e-16) are not.
-
 pub const DEGENERATE_SIN: f64 = 1e-10;
 
 /// Padding of the f32 boxes the ray-tracing BVH is built over, unit frame, so that rounding
