@@ -358,7 +358,7 @@ fn two_sided() -> SolverOptions {
 /// solver converges within the bound (largest B 0.22 of it), and the twin box gives the box's
 /// own answer on the original triangles. Two-sided antiradiance cancels light twice at every
 /// twin: the hierarchical solver still converges (with 14-25% negative mass), the dense
-/// solver's plain sweeps diverge (they used to reach 1e38 after 523 sweeps and report
+/// solver's plain sweeps diverge (unchecked, they reach 1e38 after 523 sweeps and report
 /// convergence) and must say so.
 #[test]
 fn back_to_back_twins_of_the_cornell_box() {

@@ -1,4 +1,4 @@
-//! Model only what the scene requires (issue 4): grey scenes in one channel, convex enclosures
+//! Model only what the scene requires: grey scenes in one channel, convex enclosures
 //! without antiradiance, only the antiradiance bins links use, and the optional pair cache; each
 //! saving must leave the result unchanged (or, for convex scenes, right against the analytic
 //! furnace value).

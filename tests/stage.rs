@@ -378,7 +378,7 @@ fn cli_bad_input_is_one_error_line_naming_the_file_and_writes_nothing() {
 }
 
 /// The seed meshes, when present: the legoBrick's plane faces up (towards the light), and both
-/// issue-3 scenes are written as documented.
+/// generated scenes (bear in a room, legoBrick under a light) are written as documented.
 #[test]
 fn seed_meshes_bear_in_room_and_lego_under_light() {
     let meshes = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/meshes");

@@ -3,7 +3,9 @@
 
 use antiradiance::error::{Error, Result};
 use antiradiance::output::render::CameraOptions;
-use antiradiance::scene::lights::{self, Light};
+use antiradiance::scene::lights::Light;
+
+use crate::cli::lights;
 use antiradiance::scene::{Scene, SceneOptions};
 use antiradiance::solve::budget;
 use antiradiance::solve::{Preset, SolverKind, SolverOptions};

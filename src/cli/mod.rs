@@ -5,6 +5,7 @@ pub mod args;
 pub mod commands;
 pub mod driver;
 pub mod flags;
+pub mod lights;
 pub mod relight;
 pub mod report;
 pub mod scene;

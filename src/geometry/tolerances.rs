@@ -5,6 +5,10 @@
 //!
 //! Unit frame: the solver's coordinates, centred on the scene's bounds and scaled to diameter 1
 //! ([`crate::mesh::UnitFrame`]), so an absolute tolerance there is a fraction of the scene.
+//!
+//! Not here: guards against a division by zero (`x.max(f64::MIN_POSITIVE)`), which change no
+//! decision, ranges of user parameters (a field of view of 1e-3 to 179 degrees) and the
+//! allowances of tests.
 
 /// Relative tolerance for "this point lies in that plane": distances below
 /// `PLANE_EPS * size` count as zero, where `size` is the larger triangle's longest edge.
@@ -38,7 +42,6 @@ pub const RAY_EPS: f64 = 1e-6;
 ///
 /// Relative to the triangle's own edges, so it does not depend on the scene's scale: a sliver with
 /// aspect ratio 1e6 (sin ~ 1e-6) is a real triangle, three collinear points (sin ~ 1e-16) are not.
-
 pub const DEGENERATE_SIN: f64 = 1e-10;
 
 /// Padding of the f32 boxes the ray-tracing BVH is built over, unit frame, so that rounding
@@ -91,6 +94,13 @@ pub const UNIT_NORMAL_SLACK: f64 = 1e-9;
 /// finer than exported-file noise would call a closed box with a jittered corner non-convex.
 pub const CONVEX_TOLERANCE: f64 = 1e-7;
 
+/// Largest contraction ratio (dimensionless) the convergence estimate and the radiance bounds
+/// take: a ratio of successive residuals, or the largest albedo, is capped here so that
+/// `1 / (1 - q)` stays finite (at most 1e4). Albedos are at most [`crate::scene::ALBEDO_MAX`]
+/// (0.99), so the cap never binds on a bound; it binds only on a residual ratio at or above 1
+/// (a sweep that did not contract).
+pub const MAX_CONTRACTION: f64 = 0.9999;
+
 /// A colour is grey when its channels agree to this relative amount (dimensionless): exact up
 /// to the rounding of reading the same number three times.
 pub const GREY_RELATIVE: f64 = 1e-12;
@@ -98,3 +108,93 @@ pub const GREY_RELATIVE: f64 = 1e-12;
 /// Largest deviation between the normals of two emitters merged into one direct-light group
 /// (|n_a - n_b|, about the angle in radians): coplanar up to the noise of exported files.
 pub const GROUP_NORMAL_TOLERANCE: f64 = 1e-3;
+
+/// Largest uniform random number a sampler uses where a sample of exactly 1, reachable by
+/// adding a stratum's offset and rounding, would fall outside its range: a cosine-weighted
+/// direction drawn at 1 lies in the surface's plane, an inverse-CDF lookup at 1 picks past its
+/// last interval. Dimensionless; two f64 steps below 1, so the mapping stays strictly inside.
+pub const SAMPLE_BELOW_ONE: f64 = 1.0 - f64::EPSILON;
+
+/// A bound used slightly tightened, as `bound * TIGHTER`, so that rounding cannot carry a
+/// value across it: the emitter groups' rim test of the direct light takes a member as wholly
+/// in front of a receiver only where the member's own test ([`crate::solve::direct`]) would;
+/// the `jitter` mesh variant moves a vertex by less than its distance. Dimensionless; 1e-9 is
+/// far above the rounding of the products compared, far below any change they could make.
+pub const TIGHTER: f64 = 1.0 - 1e-9;
+
+/// Shortest direction vector of an analytic light (a spot's axis, a sun's direction), in the
+/// scene's units: at or below it the direction cannot be normalized reliably and the light is
+/// refused. Any real direction is many orders of magnitude longer.
+pub const MIN_LIGHT_DIRECTION: f64 = 1e-12;
+
+/// Slack of a spot light's outer cone angle above 90 degrees (radians), so that 90 degrees
+/// given in degrees and converted to radians is accepted.
+pub const CONE_ANGLE_SLACK: f64 = 1e-9;
+
+/// Smallest span of cosines between a spot's inner and outer cone (dimensionless) over which
+/// its falloff ramps: a narrower ramp is widened to it rather than divided by a near-zero span
+/// (about 2.6 degrees at a 30-degree cone).
+pub const SPOT_MIN_COS_SPAN: f64 = 1e-3;
+
+/// A triangle's UV footprint smaller than this (texels squared) is degenerate and takes the
+/// texel at its centre: no texel cell's clipped area can then be told from rounding.
+pub const MIN_UV_AREA: f64 = 1e-12;
+
+/// Two unit directions are opposite when their sum is shorter than this (dimensionless, about
+/// the angle in radians): a sun turned to its exact opposite has no path between (refused by
+/// the relighting animation).
+pub const OPPOSITE_DIRECTIONS: f64 = 1e-6;
+
+/// Rounding allowed in a slab's normal deviation for the receiver fields (the length of the
+/// difference of two unit normals): f64 rounding of unit vectors is about 1e-16, so the margin
+/// keeps a slab conservative without widening it measurably.
+pub const NORMAL_ROUNDING: f64 = 1e-12;
+
+/// Regularization of Anderson acceleration's small least-squares system, relative to its
+/// trace (dimensionless): keeps the normal equations solvable when two stored differences are
+/// nearly parallel, and moves the solution by far less than the solver's tolerance.
+pub const ANDERSON_REGULARIZATION: f64 = 1e-12;
+
+/// The rasterizer's near plane, relative to the scene's diameter (or to 1 when the diameter is
+/// not usable): close enough that nothing in front of the camera is clipped, far enough that
+/// the inverse depth stays finite.
+pub const NEAR_PLANE_RELATIVE: f64 = 1e-6;
+
+/// A projected triangle with less signed area than this (pixels squared) is not drawn: it
+/// covers no pixel centre the edge functions can tell from rounding.
+pub const MIN_SCREEN_AREA: f64 = 1e-12;
+
+/// Two inverse depths within this relative amount are at the same depth for the rasterizer's
+/// depth test (so a front side wins over a back side there): coincident surfaces differ by
+/// rounding only.
+pub const DEPTH_TIE_RELATIVE: f64 = 1e-9;
+
+/// An eye closer than this fraction of the scene's radius to the scene's centre is at the
+/// centre: auto-framing then looks along -z instead of at the centre.
+pub const SAME_POINT_RELATIVE: f64 = 1e-9;
+
+/// Mesh variants ([`crate::scene::variants`]): a polygon corner whose two edges have a cross
+/// product below this relative to their lengths (about the sine of the angle) is collinear
+/// and dropped from a merged region's outline.
+pub const VARIANT_COLLINEAR: f64 = 1e-12;
+
+/// Mesh variants: a merged region's triangulation is kept only when its area equals the
+/// region's to this relative amount (float rounding of the sums, far below a missing piece).
+pub const VARIANT_AREA_MATCH: f64 = 1e-9;
+
+/// Mesh variants: ear-clipping's test for a point on an ear's edge, relative to the polygon's
+/// extent squared (twice the signed area of the point's triangle).
+pub const VARIANT_EAR: f64 = 1e-14;
+
+/// Mesh variants: two triangles are coplanar for region merging when the far corner of one is
+/// within this fraction of the scene's diameter of the other's plane (the noise of exported
+/// files, as [`SCENE_EPS`] is for the solver).
+pub const VARIANT_PLANE: f64 = 1e-6;
+
+/// Mesh variants: two triangles face the same way for region merging when the dot product of
+/// their unit normals is at least 1 minus this (about 1.4e-4 radians).
+pub const VARIANT_SAME_NORMAL: f64 = 1e-8;
+
+/// Mesh variants: an overlap of a merged triangle with an input triangle counts when its area
+/// is above this share of the merged triangle's (rounding of the clipped areas).
+pub const VARIANT_OVERLAP: f64 = 1e-12;

@@ -43,7 +43,7 @@ pub struct Outward {
     /// Their patches that faced inward and are solved turned around.
     pub turned: u64,
     /// The turned patches that were two-sided: their solved front is their back face (see
-    /// [`Outward::restore`]).
+    /// `Solution::restore_outward` in the solver).
     pub turned_two_sided: Vec<u32>,
 }
 
@@ -55,7 +55,7 @@ impl Patches {
     ///   made black (albedo and analytic source 0): their front radiance is their emission.
     /// - A two-sided object's patches become one-sided (their faces inside are dark), its
     ///   inward-facing ones turned around with their back face's analytic source; after the
-    ///   solve [`Outward::restore`] gives each its two faces back.
+    ///   solve `Solution::restore_outward` in the solver gives each its two faces back.
     pub fn closed_objects_outward(&self) -> Option<(Patches, Outward)> {
         let closed = closed_dark_objects(self);
         if closed.objects == 0 {
@@ -100,29 +100,6 @@ impl Patches {
                 turned_two_sided,
             },
         ))
-    }
-}
-
-impl Outward {
-    /// Puts back the faces of `solution` (solved on the patches
-    /// [`Patches::closed_objects_outward`] made from `patches`): a turned two-sided patch's
-    /// solved front is its back face, and its front (inside) has the dark inside's radiance,
-    /// its emission 0; every other patch of `patches` with two faces keeps what was solved
-    /// (0 behind for the objects' patches made one-sided). Call before
-    /// [`crate::solve::solution::Solution::settle_inactive`], which remakes the per-triangle
-    /// values.
-    pub fn restore(&self, solution: &mut crate::solve::solution::Solution, patches: &Patches) {
-        if !patches.has_two_sided() {
-            return;
-        }
-        solution
-            .patch_radiance_back
-            .resize(solution.patch_radiance.len(), [0.0; 3]);
-        for &p in &self.turned_two_sided {
-            let p = p as usize;
-            solution.patch_radiance_back[p] = solution.patch_radiance[p];
-            solution.patch_radiance[p] = [0.0; 3];
-        }
     }
 }
 

@@ -12,6 +12,7 @@ use rayon::prelude::*;
 
 use crate::geometry::raytrace::RayScene;
 use crate::geometry::sampling::{cosine_direction, point_on_triangle, Rng};
+use crate::geometry::tolerances::SAMPLE_BELOW_ONE;
 use crate::mesh::{Patches, UnitFrame};
 use crate::scene::lights::{spot_falloff, Light};
 
@@ -197,7 +198,7 @@ fn irradiance(
                     ((i / k) as f64 + rng.next_f64()) / k as f64,
                 );
                 let x = point_on_triangle(&tri, a.min(1.0), b.min(1.0));
-                let w = cosine_direction(n, rng.next_f64().min(1.0 - f64::EPSILON), rng.next_f64());
+                let w = cosine_direction(n, rng.next_f64().min(SAMPLE_BELOW_ONE), rng.next_f64());
                 if rays.visible(x, w, FAR, p, usize::MAX) {
                     escaped += 1;
                 }

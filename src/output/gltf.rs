@@ -170,20 +170,7 @@ pub fn write_baked_glb(
     solution: &Solution,
     exposure: f64,
 ) -> Result<()> {
-    if solution.patch_radiance.len() != patches.len() {
-        return Err(Error::Parameter(format!(
-            "{}: solution has {} patch values but there are {} patches",
-            path.display(),
-            solution.patch_radiance.len(),
-            patches.len()
-        )));
-    }
-    if !(exposure.is_finite() && exposure > 0.0) {
-        return Err(Error::Parameter(format!(
-            "{}: exposure {exposure} must be finite and > 0",
-            path.display()
-        )));
-    }
+    super::check_per_patch(path, patches, solution, exposure)?;
     let groups = material_groups(scene, patches);
     let mut b = Builder::default();
     let mut primitives = Vec::new();

@@ -13,7 +13,9 @@
 use std::io::Write;
 use std::path::Path;
 
-use crate::error::Result;
+use crate::error::{Error, Result};
+use crate::mesh::Patches;
+use crate::solve::solution::Solution;
 
 pub mod csv;
 pub mod gltf;
@@ -34,4 +36,30 @@ pub fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
         serde_json::to_writer_pretty(&mut *w, value).map_err(std::io::Error::other)?;
         writeln!(w)
     })
+}
+
+/// The inputs every per-patch writer ([`write_ply`], [`write_baked_glb`]) checks before writing
+/// to `path`: one value of `solution` per patch, and an `exposure` that is finite and > 0.
+/// Errors are an [`Error::Parameter`] naming `path`.
+pub(crate) fn check_per_patch(
+    path: &Path,
+    patches: &Patches,
+    solution: &Solution,
+    exposure: f64,
+) -> Result<()> {
+    if solution.patch_radiance.len() != patches.len() {
+        return Err(Error::Parameter(format!(
+            "{}: solution has {} patch values but there are {} patches",
+            path.display(),
+            solution.patch_radiance.len(),
+            patches.len()
+        )));
+    }
+    if !(exposure.is_finite() && exposure > 0.0) {
+        return Err(Error::Parameter(format!(
+            "{}: exposure {exposure} must be finite and > 0",
+            path.display()
+        )));
+    }
+    Ok(())
 }

@@ -3,7 +3,7 @@
 use std::io::Write;
 use std::path::Path;
 
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::files::{format_f64, write_atomic};
 use crate::mesh::Patches;
 use crate::output::render;
@@ -21,23 +21,10 @@ use crate::solve::solution::{sanitize, Solution};
 /// written as 0, beyond the f32 range clamped to it).
 ///
 /// `exposure` multiplies B before tone mapping (see [`render::auto_exposure`]); a non-finite
-/// or non-positive value is an [`Error::Parameter`].
+/// or non-positive value is an [`crate::Error::Parameter`].
 /// Precondition: `solution.patch_radiance.len() == patches.len()` (an error otherwise).
 pub fn write_ply(path: &Path, patches: &Patches, solution: &Solution, exposure: f64) -> Result<()> {
-    if solution.patch_radiance.len() != patches.len() {
-        return Err(Error::Parameter(format!(
-            "{}: solution has {} patch values but there are {} patches",
-            path.display(),
-            solution.patch_radiance.len(),
-            patches.len()
-        )));
-    }
-    if !(exposure.is_finite() && exposure > 0.0) {
-        return Err(Error::Parameter(format!(
-            "{}: exposure {exposure} must be finite and > 0",
-            path.display()
-        )));
-    }
+    super::check_per_patch(path, patches, solution, exposure)?;
     let welded = render::weld(patches, solution);
     write_atomic(path, |w| {
         writeln!(w, "ply")?;

@@ -42,6 +42,9 @@ use glam::DVec3;
 
 use crate::error::{Error, Result};
 use crate::files::write_atomic;
+use crate::geometry::tolerances::{
+    DEPTH_TIE_RELATIVE, MIN_SCREEN_AREA, NEAR_PLANE_RELATIVE, SAME_POINT_RELATIVE,
+};
 use crate::mesh::Patches;
 use crate::solve::solution::{sanitize, Solution};
 
@@ -426,7 +429,7 @@ impl Frame {
             (b.0 - a.0) * (py - a.1) - (b.1 - a.1) * (px - a.0)
         };
         let area = edge(s[0], s[1], s[2].0, s[2].1);
-        if area.abs() < 1e-12 || !area.is_finite() {
+        if area.abs() < MIN_SCREEN_AREA || !area.is_finite() {
             return;
         }
         let (w, h) = (self.width as f64, self.height as f64);
@@ -457,8 +460,8 @@ impl Frame {
                 let i = y * self.width + x;
                 let cur = self.inv_z[i];
                 // Nearer wins; at equal depth a front side wins over a back side.
-                let nearer = iz > cur * (1.0 + 1e-9);
-                let tie_front = front && !self.front[i] && iz >= cur * (1.0 - 1e-9);
+                let nearer = iz > cur * (1.0 + DEPTH_TIE_RELATIVE);
+                let tie_front = front && !self.front[i] && iz >= cur * (1.0 - DEPTH_TIE_RELATIVE);
                 if !(nearer || tie_front) || iz.is_nan() || iz <= 0.0 {
                     continue;
                 }
@@ -514,9 +517,9 @@ fn rasterize(patches: &Patches, solution: &Solution, welded: Option<&Welded>, vi
     let (lo, hi) = world_bounds(patches);
     let diameter = (hi - lo).length().max((eye - target).length());
     let near = if diameter > 0.0 && diameter.is_finite() {
-        diameter * 1e-6
+        diameter * NEAR_PLANE_RELATIVE
     } else {
-        1e-6
+        NEAR_PLANE_RELATIVE
     };
     let cam = Camera::new(eye, target, fov_deg, width, height, near);
     let mut frame = Frame::new(width, height);
@@ -633,7 +636,7 @@ pub fn resolve_view(patches: &Patches, camera: &CameraOptions) -> (DVec3, DVec3)
             target,
         ),
         (Some(eye), None) => {
-            if (eye - center).length() > radius * 1e-9 {
+            if (eye - center).length() > radius * SAME_POINT_RELATIVE {
                 (eye, center)
             } else {
                 (eye, eye + DVec3::NEG_Z)

@@ -27,6 +27,7 @@ use rayon::prelude::*;
 
 use crate::geometry::raytrace::RayScene;
 use crate::geometry::sampling::{cosine_direction, point_on_triangle, Rng};
+use crate::geometry::tolerances::SAMPLE_BELOW_ONE;
 use crate::mesh::Patches;
 use crate::progress::Progress;
 use crate::solve::solution::{Solution, SolveStats};
@@ -416,7 +417,7 @@ impl<'a> Tracer<'a> {
                 ((j1, j2), (j3, j4))
             };
             let x = point_on_triangle(&tri, point_u.0.min(1.0), point_u.1.min(1.0));
-            let dir_u = (dir_u.0.min(1.0 - f64::EPSILON), dir_u.1);
+            let dir_u = (dir_u.0.min(SAMPLE_BELOW_ONE), dir_u.1);
             let l = self.incident(x, n, p, dir_u, max_depth, &mut rng);
             for c in 0..3 {
                 if l[c].is_finite() {

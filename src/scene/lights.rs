@@ -27,6 +27,7 @@ use std::f64::consts::PI;
 use glam::DVec3;
 
 use crate::error::{Error, Result};
+use crate::geometry::tolerances::{CONE_ANGLE_SLACK, MIN_LIGHT_DIRECTION, SPOT_MIN_COS_SPAN};
 
 /// The luminous efficacy used to turn glTF's photometric units into radiometric ones, for every
 /// light kind and for emissive materials alike: 683 lm / W (the peak of the photopic curve,
@@ -80,7 +81,7 @@ impl Light {
     /// range. `what` names the light in the message.
     pub fn validate(&self, what: &str) -> Result<()> {
         let bad = |m: String| Err(Error::Parameter(format!("{what}: {m}")));
-        let dir_ok = |d: DVec3| d.is_finite() && d.length() > 1e-12;
+        let dir_ok = |d: DVec3| d.is_finite() && d.length() > MIN_LIGHT_DIRECTION;
         match *self {
             Light::Point {
                 position,
@@ -109,7 +110,11 @@ impl Light {
                 if !finite_rgb(intensity) {
                     return bad("intensity must be finite and >= 0".into());
                 }
-                if !(outer > 0.0 && outer <= PI / 2.0 + 1e-9 && inner >= 0.0 && inner < outer) {
+                if !(outer > 0.0
+                    && outer <= PI / 2.0 + CONE_ANGLE_SLACK
+                    && inner >= 0.0
+                    && inner < outer)
+                {
                     return bad(format!(
                         "cone angles inner {:.6} and outer {:.6} degrees need 0 <= inner < outer <= 90",
                         inner.to_degrees(),
@@ -213,71 +218,6 @@ fn towards_point(x: DVec3, position: DVec3) -> Option<(DVec3, f64, f64)> {
 /// outside the outer one, `t^2` between, `t` linear in the cosine (KHR_lights_punctual).
 pub fn spot_falloff(cos_angle: f64, inner: f64, outer: f64) -> f64 {
     let (ci, co) = (inner.cos(), outer.cos());
-    let t = ((cos_angle - co) / (ci - co).max(1e-3)).clamp(0.0, 1.0);
+    let t = ((cos_angle - co) / (ci - co).max(SPOT_MIN_COS_SPAN)).clamp(0.0, 1.0);
     t * t
-}
-
-/// Parses `--light` values: `point:X,Y,Z:R,G,B`, `spot:X,Y,Z:DX,DY,DZ:INNER,OUTER:R,G,B`
-/// (cone half-angles in degrees, the direction the spot points), `sun:DX,DY,DZ:R,G,B` (the
-/// direction the light travels). Colours are radiometric (W/sr for point and spot, W/m^2 for
-/// the sun).
-pub fn parse_light(text: &str) -> std::result::Result<Light, String> {
-    let parts: Vec<&str> = text.split(':').collect();
-    let numbers = |s: &str, n: usize, what: &str| -> std::result::Result<Vec<f64>, String> {
-        let v: Vec<f64> = s
-            .split(',')
-            .map(|w| w.trim().parse::<f64>())
-            .collect::<std::result::Result<_, _>>()
-            .map_err(|_| format!("'{s}' in {what} is not {n} comma-separated numbers"))?;
-        if v.len() != n || v.iter().any(|x| !x.is_finite()) {
-            return Err(format!("'{s}' in {what} is not {n} finite numbers"));
-        }
-        Ok(v)
-    };
-    let v3 = |v: Vec<f64>| DVec3::new(v[0], v[1], v[2]);
-    let rgb = |v: Vec<f64>| [v[0], v[1], v[2]];
-    let light = match parts.as_slice() {
-        ["point", p, c] => Light::Point {
-            position: v3(numbers(p, 3, "the position")?),
-            intensity: rgb(numbers(c, 3, "the colour")?),
-        },
-        ["spot", p, d, cone, c] => {
-            let angles = numbers(cone, 2, "the cone angles")?;
-            Light::Spot {
-                position: v3(numbers(p, 3, "the position")?),
-                direction: v3(numbers(d, 3, "the direction")?),
-                intensity: rgb(numbers(c, 3, "the colour")?),
-                inner: angles[0].to_radians(),
-                outer: angles[1].to_radians(),
-            }
-        }
-        ["sun", d, c] => Light::Sun {
-            direction: v3(numbers(d, 3, "the direction")?),
-            irradiance: rgb(numbers(c, 3, "the colour")?),
-        },
-        _ => {
-            return Err(format!(
-                "'{text}' is not point:X,Y,Z:R,G,B, spot:X,Y,Z:DX,DY,DZ:INNER,OUTER:R,G,B or sun:DX,DY,DZ:R,G,B"
-            ))
-        }
-    };
-    light.validate("--light").map_err(|e| e.to_string())?;
-    Ok(light)
-}
-
-/// Parses `--sky R,G,B` (radiance, W/(m^2 sr)).
-pub fn parse_sky(text: &str) -> std::result::Result<Light, String> {
-    let v: Vec<f64> = text
-        .split(',')
-        .map(|w| w.trim().parse::<f64>())
-        .collect::<std::result::Result<_, _>>()
-        .map_err(|_| format!("'{text}' is not R,G,B"))?;
-    if v.len() != 3 {
-        return Err(format!("'{text}' is not R,G,B"));
-    }
-    let light = Light::Sky {
-        radiance: [v[0], v[1], v[2]],
-    };
-    light.validate("--sky").map_err(|e| e.to_string())?;
-    Ok(light)
 }

@@ -10,6 +10,7 @@ pub mod generated;
 pub mod gltf;
 pub mod interiors;
 pub mod lights;
+mod mtllib;
 mod obj;
 pub mod texture;
 pub mod variants;

@@ -3,6 +3,7 @@
 //! tobj for the faces and materials.
 
 use crate::error::{Error, Result, Warning, WarningKind};
+use crate::scene::mtllib;
 use crate::scene::*;
 use glam::DVec3;
 use std::path::Path;
@@ -153,14 +154,7 @@ fn read_materials(
     let mut defined: std::collections::HashSet<String> = Default::default();
     let mut mtl_missing = false;
     for (line, name) in &obj_scan.mtllibs {
-        // `mtllib a.mtl b.mtl` names several files, unless a file of that whole name exists.
-        let whole = base_dir.join(name);
-        let names: Vec<&str> = if whole.is_file() || !name.contains(char::is_whitespace) {
-            vec![name.as_str()]
-        } else {
-            name.split_whitespace().collect()
-        };
-        for name in names {
+        for name in mtllib::names(base_dir, name) {
             let mtl_path = base_dir.join(name);
             match std::fs::read(&mtl_path) {
                 Ok(mtl_bytes) => {

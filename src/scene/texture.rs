@@ -22,6 +22,8 @@ use std::collections::HashMap;
 use std::path::Path;
 
 use crate::error::{Warning, WarningKind};
+use crate::geometry::tolerances::MIN_UV_AREA;
+use crate::scene::mtllib;
 
 /// Footprints (texel-space area) below this, with linear magnification, are averaged by
 /// bilinear samples.
@@ -217,7 +219,7 @@ impl Texture {
         });
         let cells =
             ((hi[0] - lo[0]).max(1.0) as u64).saturating_mul((hi[1] - lo[1]).max(1.0) as u64);
-        if !(area > 1e-12) {
+        if !(area > MIN_UV_AREA) {
             let c = [0, 1].map(|k| (p[0][k] + p[1][k] + p[2][k]) / 3.0);
             return self.sample(c[0], c[1], s);
         }
@@ -497,22 +499,8 @@ fn parse_map(dir: &Path, args: &[&str]) -> Option<MapRef> {
 fn obj_material_textures(obj_path: &Path, obj_text: &str) -> HashMap<String, MtlTextures> {
     let base = obj_path.parent().unwrap_or(Path::new("."));
     let mut out: HashMap<String, MtlTextures> = HashMap::new();
-    for raw in obj_text.lines() {
-        let line = raw.split('#').next().unwrap_or("").trim();
-        let Some(name) = line.strip_prefix("mtllib") else {
-            continue;
-        };
-        if !name.starts_with(char::is_whitespace) {
-            continue;
-        }
-        let name = name.trim();
-        let whole = base.join(name);
-        let names: Vec<&str> = if whole.is_file() || !name.contains(char::is_whitespace) {
-            vec![name]
-        } else {
-            name.split_whitespace().collect()
-        };
-        for name in names {
+    for argument in obj_text.lines().filter_map(mtllib::argument) {
+        for name in mtllib::names(base, argument) {
             let mtl_path = base.join(name);
             let Ok(text) = std::fs::read_to_string(&mtl_path) else {
                 continue; // the scene loader already warned

@@ -12,6 +12,7 @@
 
 use std::collections::VecDeque;
 
+use crate::geometry::tolerances::ANDERSON_REGULARIZATION;
 use rayon::prelude::*;
 
 /// Entries per parallel piece of the inner products (fixed, so the sums are formed in the same
@@ -224,7 +225,7 @@ impl Anderson {
             return;
         }
         for i in 0..m {
-            a[i * m + i] += 1e-12 * trace;
+            a[i * m + i] += ANDERSON_REGULARIZATION * trace;
         }
         let Some(gamma) = solve_small(&mut a, &mut rhs, m) else {
             self.restart();

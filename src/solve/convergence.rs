@@ -1,6 +1,7 @@
 //! The iteration steps both solvers share: the change of a sweep, the convergence estimate, and
 //! what happens at the end of every sweep ([`end_sweep`]).
 
+use crate::geometry::tolerances::MAX_CONTRACTION;
 use crate::mesh::Patches;
 use crate::progress::Progress;
 use crate::solve::health::Guard;
@@ -49,7 +50,7 @@ impl Convergence {
     pub fn update(&mut self, residual: f64, tol: f64) -> bool {
         self.residual = residual;
         let q = match self.previous {
-            Some(p) if p > 0.0 => (residual / p).min(0.9999),
+            Some(p) if p > 0.0 => (residual / p).min(MAX_CONTRACTION),
             _ => self.q_at_jump.unwrap_or(0.9),
         };
         if self.previous.is_some() {
@@ -57,7 +58,9 @@ impl Convergence {
         }
         self.since_extrapolation += 1;
         self.previous = Some(residual);
-        let q = q.max(self.contraction_bound.unwrap_or(0.0)).min(0.9999);
+        let q = q
+            .max(self.contraction_bound.unwrap_or(0.0))
+            .min(MAX_CONTRACTION);
         self.error_estimate = if residual == 0.0 {
             0.0
         } else {
@@ -79,7 +82,7 @@ impl Convergence {
     /// The factor `q / (1 - q)` by which to extrapolate the last sweep's change (`x += k (x_k -
     /// x_(k-1))`, the geometric tail of a linear iteration contracting by `q`), when the
     /// contraction ratio has settled: the last three ratios agree within 2% and lie in (0.05,
-    /// 0.9999), and three sweeps have passed since the last extrapolation. `None` otherwise.
+    /// [`MAX_CONTRACTION`]), and three sweeps have passed since the last extrapolation. `None` otherwise.
     ///
     /// The tail of a Jacobi iteration is dominated by one slowly decaying mode (for a closed
     /// room, the overall light level), so one extrapolation removes most of what many sweeps
@@ -91,7 +94,7 @@ impl Convergence {
         let last = &self.ratios[self.ratios.len() - 3..];
         let q = last[2];
         let settled = last.iter().all(|r| (r - q).abs() <= 0.02 * q);
-        if !(settled && q > 0.05 && q < 0.9999) {
+        if !(settled && q > 0.05 && q < MAX_CONTRACTION) {
             return None;
         }
         self.since_extrapolation = 0;

@@ -48,14 +48,9 @@ pub fn solve_dense(
     options: &SolverOptions,
     progress: &Progress,
 ) -> Result<Solution> {
-    if patches.has_two_sided() {
-        // The oracle solves two-sided patches as the back-to-back pairs of one-sided patches
-        // they are equivalent to (each pair's faces cover each other's backs).
-        let (expanded, back_of) = patches.with_back_faces();
-        let solution = solve_one_sided(&expanded, options, progress)?;
-        return Ok(solution.fold_back_faces(patches, &back_of));
-    }
-    solve_one_sided(patches, options, progress)
+    // The oracle solves two-sided patches as the back-to-back pairs of one-sided patches they
+    // are equivalent to.
+    Solution::of_one_sided_faces(patches, |p| solve_one_sided(p, options, progress))
 }
 
 /// [`solve_dense`] of patches that are all one-sided.
@@ -208,11 +203,11 @@ fn sweep_guard(
 ) -> (Guard, f64) {
     let (source_max, rho_max) = source_and_albedo_max(patches);
     let bound = health::radiance_bound(source_max, rho_max);
-    let reference_mass: f64 = active
+    let emitted: f64 = active
         .iter()
         .map(|&p| patches.area[p] * emission[p].iter().map(|x| x.abs()).sum::<f64>())
-        .sum::<f64>()
-        / (1.0 - rho_max.clamp(0.0, 0.9999));
+        .sum();
+    let reference_mass = health::geometric_sum(emitted, rho_max);
     let guard = Guard::new(
         options.antiradiance.then_some(bound),
         reference_mass,

@@ -42,6 +42,8 @@
 
 use serde::Serialize;
 
+use crate::geometry::tolerances::MAX_CONTRACTION;
+
 /// How far above 1 a receiver's form-factor row may sum, in a convex enclosure, before the
 /// dense solver scales it down to 1. Its rows there are within 1e-8 of 1 on the 12-triangle
 /// furnace and reach 1 + 1.1e-4 / 3.4e-4 on the furnace split to 0.2 / 0.1 (far senders are
@@ -181,10 +183,16 @@ impl Projection {
 }
 
 /// The bound `source_max / (1 - rho_max)` on every B (maximum principle: with one-sided
-/// Lambertian surfaces, B = E + rho H and H is at most the largest B). `rho_max` is capped at
-/// 0.9999 so that the bound stays finite.
+/// Lambertian surfaces, B = E + rho H and H is at most the largest B): [`geometric_sum`].
 pub fn radiance_bound(source_max: f64, rho_max: f64) -> f64 {
-    source_max / (1.0 - rho_max.clamp(0.0, 0.9999))
+    geometric_sum(source_max, rho_max)
+}
+
+/// `first / (1 - rho_max)`, the sum of `first * rho_max^k` over every bounce `k >= 0`: the
+/// radiance bound, and the light mass both solvers measure their changes against. `rho_max`
+/// is capped at [`MAX_CONTRACTION`] so that the sum stays finite.
+pub fn geometric_sum(first: f64, rho_max: f64) -> f64 {
+    first / (1.0 - rho_max.clamp(0.0, MAX_CONTRACTION))
 }
 
 /// Which check a failed solve failed.
@@ -479,7 +487,8 @@ where
     }
 }
 
-/// Conversion back from f64 for [`damp`] (radiance is f64, antiradiance f32).
+/// Conversion back from f64 for [`damp`] and the extrapolation of the hierarchical sweeps
+/// (radiance is f64, antiradiance f32).
 pub trait FromF64 {
     /// The value nearest `x`.
     fn from_f64(x: f64) -> Self;

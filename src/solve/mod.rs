@@ -121,7 +121,7 @@ pub fn run(
     };
     let mut solution = solution?;
     if let Some((_, turned)) = &outward {
-        turned.restore(&mut solution, patches);
+        solution.restore_outward(turned, patches);
         if let Some(model) = solution.stats.model.as_mut() {
             model.closed_dark_objects = turned.objects;
             model.turned_outward_patches = turned.turned;

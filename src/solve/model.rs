@@ -1,4 +1,4 @@
-//! What a scene requires the solver to model (issue 4): the hierarchical solver pays only for
+//! What a scene requires the solver to model: the hierarchical solver pays only for
 //! what a scene needs.
 //!
 //! - **Channels**: a grey scene (every albedo and every source radiance has equal R, G and B)

@@ -2,7 +2,9 @@
 
 use serde::Serialize;
 
+use crate::error::Result;
 pub use crate::files::sanitize;
+use crate::mesh::closed::Outward;
 use crate::mesh::Patches;
 use crate::solve::health::{self, FailureKind, SolveFailure};
 
@@ -172,10 +174,10 @@ pub struct Solution {
 impl SolveStats {
     /// `Ok` unless the solve failed its health checks ([`SolveStats::failure`]); then an
     /// [`crate::Error::Solve`] naming `solver` and what failed, where and by how much.
-    pub fn check(&self, solver: &str) -> crate::Result<()> {
+    pub fn check(&self, solver: &str) -> Result<()> {
         match &self.failure {
             None => Ok(()),
-            Some(f) => Err(crate::Error::Solve(format!(
+            Some(f) => Err(crate::error::Error::Solve(format!(
                 "the {solver} solver failed: {f}"
             ))),
         }
@@ -229,6 +231,42 @@ impl Solution {
             solution.settle_inactive(patches);
         }
         solution
+    }
+
+    /// Puts back the faces of this solution, solved on the patches
+    /// [`Patches::closed_objects_outward`] made from `patches` (what changed: `outward`): a
+    /// turned two-sided patch's solved front is its back face, and its front (inside) has the
+    /// dark inside's radiance, its emission 0; every other patch of `patches` with two faces
+    /// keeps what was solved (0 behind for the objects' patches made one-sided). Call before
+    /// [`Solution::settle_inactive`], which remakes the per-triangle values.
+    pub fn restore_outward(&mut self, outward: &Outward, patches: &Patches) {
+        if !patches.has_two_sided() {
+            return;
+        }
+        self.patch_radiance_back
+            .resize(self.patch_radiance.len(), [0.0; 3]);
+        for &p in &outward.turned_two_sided {
+            let p = p as usize;
+            self.patch_radiance_back[p] = self.patch_radiance[p];
+            self.patch_radiance[p] = [0.0; 3];
+        }
+    }
+
+    /// The solution of `patches` by `solve_one_sided`, a solver of one-sided patches: when
+    /// `patches` has two-sided patches, they are solved as the back-to-back pairs of one-sided
+    /// patches they are equivalent to (each pair's faces cover each other's backs,
+    /// [`Patches::with_back_faces`]) and the result is folded back
+    /// ([`Solution::fold_back_faces`]).
+    pub fn of_one_sided_faces(
+        patches: &Patches,
+        solve_one_sided: impl FnOnce(&Patches) -> Result<Solution>,
+    ) -> Result<Solution> {
+        if patches.has_two_sided() {
+            let (expanded, back_of) = patches.with_back_faces();
+            let solution = solve_one_sided(&expanded)?;
+            return Ok(solution.fold_back_faces(patches, &back_of));
+        }
+        solve_one_sided(patches)
     }
 
     /// The solution of `patches` from that of [`Patches::with_back_faces`]: the first

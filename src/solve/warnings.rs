@@ -1,6 +1,7 @@
 //! The warnings of a solve: what did not fail but is less accurate than asked.
 
 use crate::error::{Warning, WarningKind};
+use crate::geometry::tolerances::MAX_CONTRACTION;
 use crate::memory::format_bytes;
 use crate::mesh::Patches;
 use crate::solve::solution::{self, SolveStats};
@@ -133,7 +134,7 @@ pub fn cap_warning(
         .filter(|&p| patches.active[p])
         .flat_map(|p| patches.albedo[p])
         .fold(0.0f64, f64::max)
-        .min(0.9999);
+        .min(MAX_CONTRACTION);
     let r = solution::sanitize(stats.residual);
     let mut text = format!(
         "the {solver} solver stopped at the iteration cap ({} iterations) without converging: last residual {r:.2e}, tolerance {:.1e}; the result is not the converged solution",

@@ -1,5 +1,5 @@
 //! Helpers shared by the integration tests: running the binary, and checking a mesh is closed.
-//! Each test file that needs them declares `mod common;`; not every file uses every helper.
+//! Each test file that needs them declares `mod common;`; not every file uses every function.
 #![allow(dead_code)]
 
 use std::collections::HashMap;

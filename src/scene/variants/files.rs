@@ -4,6 +4,7 @@
 use super::*;
 use crate::error::{Error, Result};
 use crate::files::{format_f64, write_atomic};
+use crate::scene::mtllib;
 use std::fmt::Write as _;
 use std::io::Write as _;
 use std::path::Path;
@@ -285,22 +286,9 @@ pub fn material_files(obj_path: &Path) -> Result<Vec<PathBuf>> {
     let text = std::fs::read_to_string(obj_path).map_err(|e| Error::io(obj_path, e))?;
     let dir = obj_path.parent().unwrap_or(Path::new("."));
     let mut files = Vec::new();
-    for line in text.lines() {
-        let line = line.split('#').next().unwrap_or("").trim();
-        let Some(rest) = line.strip_prefix("mtllib") else {
-            continue;
-        };
-        if !rest.starts_with(char::is_whitespace) {
-            continue;
-        }
-        let name = rest.trim();
-        let names: Vec<&str> = if dir.join(name).is_file() || !name.contains(char::is_whitespace) {
-            vec![name]
-        } else {
-            name.split_whitespace().collect()
-        };
+    for argument in text.lines().filter_map(mtllib::argument) {
         files.extend(
-            names
+            mtllib::names(dir, argument)
                 .into_iter()
                 .map(|n| dir.join(n))
                 .filter(|p| p.is_file()),

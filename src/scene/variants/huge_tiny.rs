@@ -7,6 +7,10 @@ use crate::scene::Scene;
 use glam::{DVec2, DVec3};
 use std::collections::HashMap;
 
+use crate::geometry::tolerances::{
+    VARIANT_AREA_MATCH, VARIANT_COLLINEAR, VARIANT_EAR, VARIANT_OVERLAP, VARIANT_PLANE,
+    VARIANT_SAME_NORMAL,
+};
 use crate::union_find::UnionFind;
 
 /// The same material: index, albedo and emission bit for bit.
@@ -109,7 +113,9 @@ pub(super) fn merge_region(scene: &Scene, region: &[usize], frame: &PlaneFrame) 
         for i in 0..m {
             let (a, b, c) = (points[(i + m - 1) % m], points[i], points[(i + 1) % m]);
             let (d1, d2) = (b - a, c - b);
-            if d1.cross(d2).length() <= 1e-12 * d1.length() * d2.length() && d1.dot(d2) > 0.0 {
+            if d1.cross(d2).length() <= VARIANT_COLLINEAR * d1.length() * d2.length()
+                && d1.dot(d2) > 0.0
+            {
                 points.remove(i);
                 changed = true;
                 break;
@@ -128,7 +134,8 @@ pub(super) fn merge_region(scene: &Scene, region: &[usize], frame: &PlaneFrame) 
         .sum();
     let merged_area: f64 = merged.flat.iter().map(flat_area).sum();
     let all_positive = merged.flat.iter().all(|t| flat_area(t) > 0.0);
-    (all_positive && (merged_area - region_area).abs() <= 1e-9 * region_area).then_some(merged)
+    (all_positive && (merged_area - region_area).abs() <= VARIANT_AREA_MATCH * region_area)
+        .then_some(merged)
 }
 
 /// Ear clipping of a simple polygon given counter-clockwise; triangles as index triples.
@@ -140,7 +147,7 @@ pub(super) fn ear_clip(p: &[DVec2]) -> Option<Vec<[usize; 3]>> {
         return None;
     }
     let scale = p.iter().fold(0.0f64, |m, q| m.max(q.length()));
-    let eps = 1e-14 * scale * scale;
+    let eps = VARIANT_EAR * scale * scale;
     let cross = |a: DVec2, b: DVec2, c: DVec2| (b - a).perp_dot(c - a);
     let mut idx: Vec<usize> = (0..p.len()).collect();
     let mut out = Vec::with_capacity(p.len().saturating_sub(2));
@@ -205,7 +212,7 @@ pub(super) fn huge_tiny(scene: &Scene, tiny: usize) -> Result<(Out, String)> {
     let n = scene.len();
     let (lo, hi) = scene.bounds();
     let diameter = (hi - lo).length();
-    let tol = 1e-6 * diameter;
+    let tol = VARIANT_PLANE * diameter;
     let normals: Vec<DVec3> = (0..n).map(|t| unit_normal(&scene.corners(t))).collect();
     let live: Vec<bool> = (0..n).map(|t| !scene.is_degenerate(t)).collect();
 
@@ -295,7 +302,7 @@ fn flat_regions(scene: &Scene, normals: &[DVec3], live: &[bool], tol: f64) -> Ve
         let far = c2[(e2 + 2) % 3];
         if opposite
             && same_material(scene, t1, t2)
-            && normals[t1].dot(normals[t2]) >= 1.0 - 1e-8
+            && normals[t1].dot(normals[t2]) >= 1.0 - VARIANT_SAME_NORMAL
             && (far - c1[0]).dot(normals[t1]).abs() <= tol
         {
             sets.union(t1, t2);
@@ -456,7 +463,7 @@ fn merged_rows(scene: &Scene, huge: &HugeRegion) -> Vec<Vec<(usize, f64)>> {
                 continue;
             }
             let a = overlap_area(&flat, tri);
-            if a > 1e-12 * flat_area(&flat).abs() {
+            if a > VARIANT_OVERLAP * flat_area(&flat).abs() {
                 overlaps.push((m, a));
             }
         }

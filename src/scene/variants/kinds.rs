@@ -7,6 +7,7 @@ use glam::{DVec2, DVec3};
 
 use super::*;
 use crate::geometry::sampling::{mix64, Rng};
+use crate::geometry::tolerances::TIGHTER;
 use crate::scene::Scene;
 
 /// `fan`: k slivers from the vertex opposite the shortest edge, plus k - 1 in the strip along
@@ -269,7 +270,7 @@ pub(super) fn jitter(scene: &Scene, distance: f64, seed: u64) -> Out {
                         break d;
                     }
                 };
-                let moved = p + d * (distance * (1.0 - 1e-9));
+                let moved = p + d * (distance * TIGHTER);
                 if (moved - p).length() <= distance {
                     moved
                 } else {

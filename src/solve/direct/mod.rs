@@ -55,6 +55,7 @@ use rayon::prelude::*;
 use crate::geometry::raytrace::RayScene;
 use crate::geometry::sampling::{point_on_triangle, Rng};
 use crate::geometry::tolerances::GROUP_NORMAL_TOLERANCE;
+use crate::geometry::tolerances::{SAMPLE_BELOW_ONE, TIGHTER};
 use crate::geometry::{self, plane_tol, PLANE_EPS};
 use crate::mesh::Patches;
 use crate::progress::Progress;
@@ -401,7 +402,7 @@ impl<'a> DirectLight<'a> {
             return true;
         }
         // Every member's own test (`emitter_form_factor`) uses at least this tolerance.
-        let member_tol = plane_tol(receiver.size) * (1.0 - 1e-9);
+        let member_tol = plane_tol(receiver.size) * TIGHTER;
         r.corners
             .iter()
             .all(|&c| group.normal.dot(c - group.centroid) + spread(c) <= member_tol)
@@ -693,7 +694,7 @@ impl<'a> DirectLight<'a> {
             );
             // 2. A group by its light here, a member by area (the choice's position within the
             //    group's interval, rescaled, keeps the strata), and a point on the member.
-            let u = ((choice_perm[i] as f64 + rng.next_f64()) * inv_n).min(1.0 - f64::EPSILON);
+            let u = ((choice_perm[i] as f64 + rng.next_f64()) * inv_n).min(SAMPLE_BELOW_ONE);
             let j = interval_of(cdf, u);
             let low = if j == 0 { 0.0 } else { cdf[j - 1] };
             let probability = cdf[j] - low;
@@ -701,7 +702,7 @@ impl<'a> DirectLight<'a> {
                 continue;
             }
             let group = &self.groups[lights[j].group as usize];
-            let k_s = group.pick(((u - low) / probability).clamp(0.0, 1.0 - f64::EPSILON));
+            let k_s = group.pick(((u - low) / probability).clamp(0.0, SAMPLE_BELOW_ONE));
             let s = &self.emitters.geom[k_s];
             let cell = point_perm[i] as usize;
             let y = point_on_triangle(

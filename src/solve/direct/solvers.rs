@@ -168,12 +168,16 @@ pub fn solve_dense_direct(
     options: &SolverOptions,
     progress: &Progress,
 ) -> Result<Solution> {
-    if patches.has_two_sided() {
-        // As `dense::solve_dense`: back faces as one-sided patches of their own.
-        let (expanded, back_of) = patches.with_back_faces();
-        let solution = solve_dense_direct(&expanded, options, progress)?;
-        return Ok(solution.fold_back_faces(patches, &back_of));
-    }
+    // As `dense::solve_dense`: back faces as one-sided patches of their own.
+    Solution::of_one_sided_faces(patches, |p| dense_direct_one_sided(p, options, progress))
+}
+
+/// [`solve_dense_direct`] of patches that are all one-sided.
+fn dense_direct_one_sided(
+    patches: &Patches,
+    options: &SolverOptions,
+    progress: &Progress,
+) -> Result<Solution> {
     let receivers = patch_receivers(patches);
     let budget = Budget::start(options.memory_limit());
     // The dense solve, and the copy of the patches that carries its source.

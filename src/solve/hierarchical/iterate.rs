@@ -390,13 +390,13 @@ impl Prepared {
             .chain(emission_back)
             .flat_map(|s| s.iter().map(|x| x.abs()))
             .fold(0.0f64, f64::max);
-        let reference_mass: f64 = emission
+        let emitted: f64 = emission
             .iter()
             .zip(&self.elem_area)
             .chain(emission_back.iter().zip(&self.elem_area))
             .map(|(s, &a)| a * s.iter().map(|x| x.abs()).sum::<f64>())
-            .sum::<f64>()
-            / (1.0 - rho_max.clamp(0.0, 0.9999));
+            .sum();
+        let reference_mass = health::geometric_sum(emitted, rho_max);
         let bound = options
             .antiradiance
             .then(|| health::radiance_bound(source_max, rho_max));

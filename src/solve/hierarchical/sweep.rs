@@ -459,7 +459,7 @@ pub(super) fn unpack<const C: usize>(
 /// `x += k (x - x_previous)`, element-wise.
 pub(super) fn extrapolate<const C: usize, T>(x: &mut [[T; C]], x_previous: &[[T; C]], k: f64)
 where
-    T: Copy + Into<f64> + FromF64 + Send + Sync,
+    T: Copy + Into<f64> + health::FromF64 + Send + Sync,
 {
     x.par_iter_mut()
         .zip(x_previous.par_iter())
@@ -469,21 +469,4 @@ where
                 a[c] = T::from_f64(v + k * (v - p));
             }
         });
-}
-
-/// Conversion back from f64 for [`extrapolate`].
-pub(super) trait FromF64 {
-    fn from_f64(x: f64) -> Self;
-}
-
-impl FromF64 for f64 {
-    fn from_f64(x: f64) -> Self {
-        x
-    }
-}
-
-impl FromF64 for f32 {
-    fn from_f64(x: f64) -> Self {
-        x as f32
-    }
 }

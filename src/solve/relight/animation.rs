@@ -7,6 +7,7 @@ use glam::DVec3;
 
 use super::light_kind;
 use crate::error::{Error, Result};
+use crate::geometry::tolerances::OPPOSITE_DIRECTIONS;
 use crate::scene::lights::Light;
 use crate::scene::Scene;
 
@@ -189,7 +190,7 @@ pub fn check_light_changes(lights: &[Light], changes: &[LightChange]) -> Result<
                     }
                     Light::Sun { direction, .. } => {
                         let (a, b) = (direction.normalize_or_zero(), to.normalize_or_zero());
-                        if b == DVec3::ZERO || (a + b).length() < 1e-6 {
+                        if b == DVec3::ZERO || (a + b).length() < OPPOSITE_DIRECTIONS {
                             return Err(Error::Parameter(format!(
                                 "light {k} is a sun: its end direction must be non-zero and not opposite to its direction"
                             )));

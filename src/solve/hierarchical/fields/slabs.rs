@@ -2,7 +2,7 @@
 //! of them see a sender in front, for the field test.
 
 use super::*;
-use crate::geometry::tolerances::FIELD_NORMAL_MERGE;
+use crate::geometry::tolerances::{FIELD_NORMAL_MERGE, NORMAL_ROUNDING};
 
 /// Most distinct normals a receiver keeps as slabs of one normal each (the bits of a slab
 /// mask); beyond it its slabs are the cells of a coarse direction grid (`SLAB_CELLS` x
@@ -158,13 +158,15 @@ impl Prepared {
                     slab.hi = slab.hi.max(h);
                     // The normals' own distance from the axis (at most sqrt(2 x merge)),
                     // with a little for its rounding.
-                    slab.deviation = slab.deviation.max((n - slab.axis).length() + 1e-12);
+                    slab.deviation = slab
+                        .deviation
+                        .max((n - slab.axis).length() + NORMAL_ROUNDING);
                 }
                 None if slabs.len() < MAX_SLABS => {
                     let h = n.dot(x);
                     slabs.push(Slab {
                         axis: n,
-                        deviation: 1e-12,
+                        deviation: NORMAL_ROUNDING,
                         lo: h,
                         hi: h,
                     });
