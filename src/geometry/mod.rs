@@ -478,7 +478,7 @@ pub const SLIVER_EDGE_RATIO: f64 = 0.5;
 /// other triangle in four, by bisecting across its longest edge twice ([`bisect`]). Ties
 /// within [`SCENE_EPS`] are broken in corner order, so float noise in the corners does not
 /// change the cut.
-pub fn split_in_pieces(tri: &Tri) -> ([Tri; 4], usize) {
+pub fn split_in_pieces(tri: &Tri) -> smallvec::SmallVec<[Tri; 4]> {
     let len = |k: usize| (tri[(k + 1) % 3] - tri[k]).length();
     let lens = [len(0), len(1), len(2)];
     // Edge k joins corners k and k + 1; the shortest edge (first within SCENE_EPS) is opposite
@@ -495,16 +495,14 @@ pub fn split_in_pieces(tri: &Tri) -> ([Tri; 4], usize) {
         let (b, c, a) = (tri[short], tri[(short + 1) % 3], tri[(short + 2) % 3]);
         let (m, n) = (0.5 * (a + b), 0.5 * (a + c));
         // The quadrilateral m b c n, cut by its shorter diagonal (m c unless b n is shorter).
-        let quad = if (b - n).length() < (m - c).length() - SCENE_EPS {
+        let [q0, q1] = if (b - n).length() < (m - c).length() - SCENE_EPS {
             [[m, b, n], [b, c, n]]
         } else {
             [[m, b, c], [m, c, n]]
         };
-        return ([[a, m, n], quad[0], quad[1], [a, a, a]], 3);
+        return smallvec::smallvec![[a, m, n], q0, q1];
     }
-    let [h0, h1] = bisect(tri);
-    let ([p0, p1], [p2, p3]) = (bisect(&h0), bisect(&h1));
-    ([p0, p1, p2, p3], 4)
+    bisect(tri).iter().flat_map(bisect).collect()
 }
 
 /// The `m * m` congruent sub-triangles of `tri` (uniform midpoint-style subdivision), in a fixed
@@ -545,22 +543,11 @@ mod tests {
 
     /// Longest edge squared over area.
     fn aspect(t: &Tri) -> f64 {
-        let l = (t[1] - t[0])
-            .length()
-            .max((t[2] - t[1]).length())
-            .max((t[0] - t[2]).length());
-        l * l / area(t)
-    }
-
-    fn longest(t: &Tri) -> f64 {
-        (t[1] - t[0])
-            .length()
-            .max((t[2] - t[1]).length())
-            .max((t[0] - t[2]).length())
+        longest_edge(t).powi(2) / area(t)
     }
 
     #[test]
-    fn split_in_pieces_halves_slivers_and_their_aspect() {
+    fn split_in_pieces_halves_slivers_into_well_shaped_pieces() {
         // A fan's sliver: the apex far away, a short base (aspect 200), in every corner order.
         let (a, b, c) = (
             DVec3::ZERO,
@@ -568,15 +555,17 @@ mod tests {
             DVec3::new(10.0, 0.1, 0.0),
         );
         for tri in [[a, b, c], [b, c, a], [c, a, b]] {
-            let (pieces, count) = split_in_pieces(&tri);
-            assert_eq!(count, 3, "a sliver is cut across, in three");
-            let pieces = &pieces[..count];
+            let pieces = split_in_pieces(&tri);
+            assert_eq!(pieces.len(), 3, "a sliver is cut across, in three");
             let total: f64 = pieces.iter().map(area).sum();
             assert!((total - area(&tri)).abs() < 1e-12 * area(&tri));
             let n = normal(&tri).unwrap();
-            for p in pieces {
+            for p in &pieces {
                 assert!((normal(p).unwrap() - n).length() < 1e-9, "orientation kept");
-                assert!(longest(p) <= 0.5 * longest(&tri) + 1e-9, "half as long");
+                assert!(
+                    longest_edge(p) <= 0.5 * longest_edge(&tri) + 1e-9,
+                    "half as long"
+                );
             }
             // The corner piece is the sliver at half scale; the two pieces beside the base are
             // half as long and about as wide (aspect ratios of 1/2 and 1 of the sliver's).
@@ -588,8 +577,7 @@ mod tests {
         // Repeated splits of the pieces beside the base end in well-shaped triangles.
         let mut tri = [a, b, c];
         for _ in 0..8 {
-            let (pieces, count) = split_in_pieces(&tri);
-            tri = pieces[..count]
+            tri = split_in_pieces(&tri)
                 .iter()
                 .copied()
                 .min_by(|p, q| aspect(p).total_cmp(&aspect(q)))
@@ -601,11 +589,9 @@ mod tests {
     #[test]
     fn split_in_pieces_bisects_well_shaped_triangles_in_four() {
         let tri = [DVec3::ZERO, DVec3::X * 2.0, DVec3::new(0.3, 1.7, 0.2)];
-        let (pieces, count) = split_in_pieces(&tri);
-        assert_eq!(count, 4);
         let [h0, h1] = bisect(&tri);
         let want: Vec<Tri> = bisect(&h0).into_iter().chain(bisect(&h1)).collect();
-        assert_eq!(&pieces[..4], &want[..]);
+        assert_eq!(&split_in_pieces(&tri)[..], &want[..]);
     }
 
     #[test]

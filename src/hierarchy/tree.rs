@@ -538,8 +538,8 @@ impl ClusterTree {
         let (patch, depth, corners) = (node.patch, node.split_depth, node.corners);
         let (blocks_back, two_sided) = (node.blocks_back, node.two_sided);
         let first = self.nodes.len() as u32;
-        let (pieces, count) = geometry::split_in_pieces(&corners);
-        for &piece in &pieces[..count] {
+        let pieces = geometry::split_in_pieces(&corners);
+        for &piece in &pieces {
             let mut leaf = leaf_node(piece, patch, i, depth + 1);
             leaf.blocks_back = blocks_back;
             leaf.two_sided = two_sided;
@@ -547,7 +547,7 @@ impl ClusterTree {
         }
         let node = &mut self.nodes[i as usize];
         node.first_child = first;
-        node.child_count = count as u8;
+        node.child_count = pieces.len() as u8;
         first
     }
 
