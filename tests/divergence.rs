@@ -430,12 +430,11 @@ fn back_to_back_twins_of_venetian_blinds() {
 }
 
 /// The twin blinds 1e-9 apart (two one-sided surfaces back to back at every slat face),
-/// front-only antiradiance, hierarchical solver: plain and damped sweeps amplified (500-sweep cap
-/// with B up to 1.2e9, then failed at sweep 213); projected sweeps
-/// ([`health::Projection`]) converge to the answer of the same slats merged into two-sided
-/// ones (measured 0.58%).
+/// front-only antiradiance, hierarchical solver: the solve ends within the bound, converged
+/// (plain sweeps, or projected ones ([`health::Projection`]) once damped), near the answer of the
+/// same slats merged into two-sided ones (measured 1.02%: 98 sweeps, row sums up to 5.0).
 #[test]
-fn projected_sweeps_recover_the_twin_blinds() {
+fn twin_blinds_converge_near_the_merged_slats() {
     let blinds = blinds_room(30);
     let hierarchical = SOLVERS[0];
     let merged = solve_with(&blinds.twinned().scene(), &front_only(), hierarchical);
@@ -452,10 +451,6 @@ fn projected_sweeps_recover_the_twin_blinds() {
         st.converged,
         "{} sweeps, residual {}",
         st.iterations, st.residual
-    );
-    assert!(
-        st.damped_after.is_some(),
-        "the projection engages once damped"
     );
     let (mut num, mut den) = (0.0, 0.0);
     for t in 0..twins.len() {

@@ -274,3 +274,60 @@ fn curved_receiver_fields_bear_in_a_room() {
     let e = error(&patches, &a, &b);
     assert!(e < 0.003, "{:.3}%", 100.0 * e);
 }
+
+/// A tiny object beside big surfaces (a 1 mm cube on the Cornell box's floor): every pair with
+/// the cube or one of its triangles carries less than the flux rule's share whatever its
+/// geometry, so the cube splits no leaf (its pairs are coupled exactly as they are); the box's
+/// triangles stay within 0.5% of the box without it. The same cube as an emitter is never faint (near a light, a receiver's
+/// resolution carries the light's gradient) and splits the floor around it.
+#[test]
+fn a_tiny_cube_on_a_floor_splits_nothing() {
+    use antiradiance::scene::generated::push_cube;
+    let with_cubes = |emission: f64| {
+        let mut scene = generated::cornell_box();
+        let first = push_cube(&mut scene, glam::DVec3::new(200.0, 0.0, 150.0), 1.0, 0.5);
+        for t in first..scene.len() {
+            scene.emission[t] = [emission; 3];
+        }
+        build_patches(&scene, None)
+    };
+    let options = SolverOptions::default();
+    let stats = |patches: &Patches| {
+        let prepared = Prepared::new(patches, &options, true).unwrap();
+        links::validate(&prepared.tree, &prepared.links).unwrap();
+        prepared.links.stats
+    };
+    let box_alone = stats(&build_patches(&generated::cornell_box(), None));
+    let grit = with_cubes(0.0);
+    let faint = stats(&grit);
+    let lit = stats(&with_cubes(5.0));
+    eprintln!(
+        "leaf splits: box {}, with the cube {} ({} faint pairs), emitting cube {}",
+        box_alone.leaf_splits, faint.leaf_splits, faint.faint_exact, lit.leaf_splits
+    );
+    assert!(faint.faint_exact > 0, "no faint pair");
+    assert_eq!(
+        faint.leaf_splits, box_alone.leaf_splits,
+        "the cube split leaves"
+    );
+    assert!(
+        lit.leaf_splits > box_alone.leaf_splits,
+        "the emitting cube split nothing"
+    );
+    // The box's own triangles, with and without the cube.
+    let boxed = build_patches(&generated::cornell_box(), None);
+    let alone = solve_hierarchical(&boxed, &options, &Progress::hidden()).unwrap();
+    let with = solve_hierarchical(&grit, &options, &Progress::hidden()).unwrap();
+    let n = boxed.len();
+    let emissive: Vec<bool> = (boxed.emission.iter())
+        .map(|e| e.iter().any(|&x| x > 0.0))
+        .collect();
+    let err = relative_error(
+        &boxed.area,
+        &emissive,
+        &with.patch_radiance[..n],
+        &alone.patch_radiance,
+    );
+    eprintln!("the box's triangles with the cube against without: {err:.5}");
+    assert!(err < 0.005, "the cube moved the box's result by {err}");
+}

@@ -57,6 +57,9 @@ pub struct Node {
     pub cone_cos: f64,
     /// Some triangle below blocks light arriving at its back ([`ClusterTree::mark_back_blocking`]).
     pub blocks_back: bool,
+    /// Some triangle below emits light ([`ClusterTree::mark_emitting`]): its pairs are never
+    /// faint (see [`crate::hierarchy::links::LinkParams::flux_share`]).
+    pub emits: bool,
     /// A leaf of a two-sided patch: both its faces emit and reflect
     /// ([`ClusterTree::mark_two_sided`]; false on clusters).
     pub two_sided: bool,
@@ -118,6 +121,7 @@ fn leaf_node(corners: Tri, patch: u32, parent: u32, split_depth: u8) -> Node {
         cone_axis: normal,
         cone_cos: 1.0,
         blocks_back: false,
+        emits: false,
         two_sided: false,
         height: 0.0,
     }
@@ -536,12 +540,13 @@ impl ClusterTree {
         let node = &self.nodes[i as usize];
         debug_assert!(node.is_leaf());
         let (patch, depth, corners) = (node.patch, node.split_depth, node.corners);
-        let (blocks_back, two_sided) = (node.blocks_back, node.two_sided);
+        let (blocks_back, emits, two_sided) = (node.blocks_back, node.emits, node.two_sided);
         let first = self.nodes.len() as u32;
         let pieces = geometry::split_in_pieces(&corners);
         for &piece in &pieces {
             let mut leaf = leaf_node(piece, patch, i, depth + 1);
             leaf.blocks_back = blocks_back;
+            leaf.emits = emits;
             leaf.two_sided = two_sided;
             self.nodes.push(leaf);
         }
@@ -557,8 +562,23 @@ impl ClusterTree {
     /// # Panics
     /// When `per_patch` is shorter than a leaf's patch index.
     pub fn mark_back_blocking(&mut self, per_patch: &[bool]) {
+        self.mark_with_ancestors(per_patch, |n| &mut n.blocks_back);
+    }
+
+    /// Marks the leaves of patches with `per_patch[p]` as emitting, and every ancestor of such
+    /// a leaf. Call before refinement (pieces split later inherit it).
+    ///
+    /// # Panics
+    /// When `per_patch` is shorter than a leaf's patch index.
+    pub fn mark_emitting(&mut self, per_patch: &[bool]) {
+        self.mark_with_ancestors(per_patch, |n| &mut n.emits);
+    }
+
+    /// Sets `flag` on the leaves of patches with `per_patch[p]` and on their ancestors, and
+    /// clears it everywhere else.
+    fn mark_with_ancestors(&mut self, per_patch: &[bool], flag: fn(&mut Node) -> &mut bool) {
         for n in &mut self.nodes {
-            n.blocks_back = false;
+            *flag(n) = false;
         }
         for i in 0..self.nodes.len() {
             let n = &self.nodes[i];
@@ -568,9 +588,9 @@ impl ClusterTree {
             // Up to the first ancestor already marked (its own ancestors are).
             let mut a = i as u32;
             loop {
-                self.nodes[a as usize].blocks_back = true;
+                *flag(&mut self.nodes[a as usize]) = true;
                 a = self.nodes[a as usize].parent;
-                if a == NONE || self.nodes[a as usize].blocks_back {
+                if a == NONE || *flag(&mut self.nodes[a as usize]) {
                     break;
                 }
             }

@@ -135,6 +135,7 @@ impl Found {
         for p in &pieces {
             stats.culled_pairs += p.stats.culled_pairs;
             stats.silent_links += p.stats.silent_links;
+            stats.faint_exact += p.stats.faint_exact;
         }
         Found {
             cluster: gather(&mut pieces, |p| &mut p.cluster),
@@ -256,9 +257,13 @@ impl Traversal<'_> {
         }
         // Too coarse: split the larger node. A leaf triangle is split (into sub-triangles) only
         // when it is much larger than its partner and than the gap between them (a coarse floor
-        // under a small object), above the resolution floor, never among similar neighbours.
+        // under a small object), above the resolution floor, never among similar neighbours,
+        // and never for a faint pair (the light it carries is within the flux rule's share
+        // whatever its geometry: its leaves are coupled exactly as they are).
+        let faint = self.faint(sn, rn);
         let leaf_splittable = |n: &crate::hierarchy::Node, other: &crate::hierarchy::Node| {
             params.epsilon > 0.0
+                && !faint
                 && n.split_depth < params.max_split_depth
                 && n.radius > params.min_radius
                 && n.radius > 2.0 * other.radius
@@ -268,6 +273,9 @@ impl Traversal<'_> {
         let r_can = !rn.is_leaf() || leaf_splittable(rn, sn);
         let split_s = match (s_can, r_can) {
             (false, false) => {
+                if faint {
+                    found.stats.faint_exact += 1;
+                }
                 found.exact.push((s, r));
                 return;
             }
@@ -280,6 +288,30 @@ impl Traversal<'_> {
             return;
         }
         split_pair(tree, (s, r), split_s, push);
+    }
+
+    /// True when the pair (`sn`, `rn`) carries at most the flux rule's share whatever its
+    /// shape: `min(A_r * omega_s, A_s * omega_r) <= flux_limit`, each solid angle bounded by
+    /// what a node can subtend from anywhere outside its bounds at their gap (a triangle of
+    /// area `A` at distance at least `g`: `A / g^2`; a cluster: its bounds' faces), and by `pi`
+    /// (the projected solid angle a receiver can gather, so that tiny triangles are faint next
+    /// to anything).
+    fn faint(&self, sn: &crate::hierarchy::Node, rn: &crate::hierarchy::Node) -> bool {
+        if !(self.params.epsilon > 0.0 && self.flux_limit > 0.0) || sn.emits || rn.emits {
+            return false;
+        }
+        let g = box_gap(sn, rn);
+        let omega = |n: &crate::hierarchy::Node| {
+            let apart = if g <= 0.0 {
+                f64::INFINITY
+            } else if n.is_leaf() {
+                n.area / (g * g)
+            } else {
+                box_solid_angle_bound(n, g)
+            };
+            apart.min(std::f64::consts::PI)
+        };
+        (rn.area * omega(sn)).min(sn.area * omega(rn)) <= self.flux_limit
     }
 
     /// Everything below `pairs`, in parallel, appended to `pieces`: each task walks its pairs
