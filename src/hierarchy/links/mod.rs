@@ -179,8 +179,9 @@ pub struct LinkStats {
     pub exact_touching: u64,
     /// Exact pairs that are apart but failed the solid-angle test.
     pub exact_apart: u64,
-    /// Exact pairs that are faint (they carry at most the flux rule's share whatever their
-    /// geometry, so their leaves were not split for them; see [`LinkParams::flux_share`]).
+    /// Exact pairs (of `exact_pairs`) that are faint: they carry at most the flux rule's share
+    /// whatever their geometry, so their leaves were not split for them
+    /// ([`LinkParams::flux_share`]).
     pub faint_exact: u64,
     /// Receivers of exact links by quadrature points per side (index q - 1, last bin q >= 8).
     pub receivers_by_quadrature: [u64; 8],
@@ -275,7 +276,12 @@ pub fn refine(
         ..
     } = Found::concat(pieces);
     stats.leaf_splits = leaf_splits;
+    let limit = traverse::flux_limit(params, tree);
     for &(s, r) in &exact_pairs {
+        let (sn, rn) = (&tree.nodes[s as usize], &tree.nodes[r as usize]);
+        if traverse::faint(sn, rn, params, limit) {
+            stats.faint_exact += 1;
+        }
         if sphere_gap(tree, s, r) > 0.0 {
             stats.exact_apart += 1;
         } else {

@@ -100,6 +100,41 @@ fn culled(tree: &ClusterTree, s: u32, r: u32, two_sided: bool) -> bool {
     max_dist <= tol && (!two_sided || min_dist >= -tol)
 }
 
+/// The largest `area * solid angle` of a link the flux rule accepts
+/// ([`LinkParams::flux_share`] times `epsilon` of `pi` times the scene's area).
+pub(super) fn flux_limit(params: &LinkParams, tree: &ClusterTree) -> f64 {
+    params.flux_share * params.epsilon * std::f64::consts::PI * tree.nodes[0].area
+}
+
+/// True when the pair (`sn`, `rn`) carries at most `flux_limit` whatever its shape and holds
+/// no emitter: `min(A_r * omega_s, A_s * omega_r) <= flux_limit`, each solid angle bounded by
+/// what a node can subtend from anywhere outside its bounds at their gap (a triangle of area
+/// `A` at distance at least `g`: `A / g^2`; a cluster: its bounds' faces), and by `pi` (the
+/// projected solid angle a receiver can gather, so that tiny triangles are faint next to
+/// anything). Such a pair splits no leaf ([`LinkParams::flux_share`]).
+pub(super) fn faint(
+    sn: &crate::hierarchy::Node,
+    rn: &crate::hierarchy::Node,
+    params: &LinkParams,
+    flux_limit: f64,
+) -> bool {
+    if !(params.epsilon > 0.0 && flux_limit > 0.0) || sn.emits || rn.emits {
+        return false;
+    }
+    let g = box_gap(sn, rn);
+    let omega = |n: &crate::hierarchy::Node| {
+        let apart = if g <= 0.0 {
+            f64::INFINITY
+        } else if n.is_leaf() {
+            n.area / (g * g)
+        } else {
+            box_solid_angle_bound(n, g)
+        };
+        apart.min(std::f64::consts::PI)
+    };
+    (rn.area * omega(sn)).min(sn.area * omega(rn)) <= flux_limit
+}
+
 /// What the traversal found below some node pairs (one task's share, merged in pair order).
 #[derive(Default)]
 pub(super) struct Found {
@@ -135,7 +170,6 @@ impl Found {
         for p in &pieces {
             stats.culled_pairs += p.stats.culled_pairs;
             stats.silent_links += p.stats.silent_links;
-            stats.faint_exact += p.stats.faint_exact;
         }
         Found {
             cluster: gather(&mut pieces, |p| &mut p.cluster),
@@ -273,9 +307,6 @@ impl Traversal<'_> {
         let r_can = !rn.is_leaf() || leaf_splittable(rn, sn);
         let split_s = match (s_can, r_can) {
             (false, false) => {
-                if faint {
-                    found.stats.faint_exact += 1;
-                }
                 found.exact.push((s, r));
                 return;
             }
@@ -290,28 +321,9 @@ impl Traversal<'_> {
         split_pair(tree, (s, r), split_s, push);
     }
 
-    /// True when the pair (`sn`, `rn`) carries at most the flux rule's share whatever its
-    /// shape: `min(A_r * omega_s, A_s * omega_r) <= flux_limit`, each solid angle bounded by
-    /// what a node can subtend from anywhere outside its bounds at their gap (a triangle of
-    /// area `A` at distance at least `g`: `A / g^2`; a cluster: its bounds' faces), and by `pi`
-    /// (the projected solid angle a receiver can gather, so that tiny triangles are faint next
-    /// to anything).
+    /// [`faint`] with this traversal's limit.
     fn faint(&self, sn: &crate::hierarchy::Node, rn: &crate::hierarchy::Node) -> bool {
-        if !(self.params.epsilon > 0.0 && self.flux_limit > 0.0) || sn.emits || rn.emits {
-            return false;
-        }
-        let g = box_gap(sn, rn);
-        let omega = |n: &crate::hierarchy::Node| {
-            let apart = if g <= 0.0 {
-                f64::INFINITY
-            } else if n.is_leaf() {
-                n.area / (g * g)
-            } else {
-                box_solid_angle_bound(n, g)
-            };
-            apart.min(std::f64::consts::PI)
-        };
-        (rn.area * omega(sn)).min(sn.area * omega(rn)) <= self.flux_limit
+        faint(sn, rn, self.params, self.flux_limit)
     }
 
     /// Everything below `pairs`, in parallel, appended to `pieces`: each task walks its pairs
@@ -433,10 +445,7 @@ pub(super) fn rounds(
             coupling,
             record_culled,
             limit: params.epsilon * bins.mean_solid_angle(),
-            flux_limit: params.flux_share
-                * params.epsilon
-                * std::f64::consts::PI
-                * tree.nodes[0].area,
+            flux_limit: flux_limit(params, tree),
             meter: &meter,
         };
         // 1. Expand the top breadth first until there is work for every thread.
