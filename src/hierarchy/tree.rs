@@ -229,11 +229,22 @@ fn sah_split(range: &mut [u32], centroid: &[DVec3], corners: &[Tri]) -> usize {
 }
 
 impl ClusterTree {
-    /// Builds the tree over the active patches, one patch per leaf (`build_nodes`).
+    /// Builds the tree over the active patches, one patch per leaf (`build_nodes`), with the
+    /// patches that emit marked ([`ClusterTree::mark_emitting`]).
     ///
     /// # Panics
     /// If no patch is active (the loader rejects such scenes).
     pub fn build(patches: &Patches) -> ClusterTree {
+        let mut tree = ClusterTree::build_unmarked(patches);
+        let emitting: Vec<bool> = (patches.emission.iter())
+            .map(|e| e.iter().any(|&x| x > 0.0))
+            .collect();
+        tree.mark_emitting(&emitting);
+        tree
+    }
+
+    /// [`ClusterTree::build`] without the emitters marked.
+    fn build_unmarked(patches: &Patches) -> ClusterTree {
         let active: Vec<u32> = (0..patches.len() as u32)
             .filter(|&p| patches.active[p as usize])
             .collect();

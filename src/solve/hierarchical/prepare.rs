@@ -99,10 +99,6 @@ impl Prepared {
         } = model::Backs::of(patches, options);
         tree.mark_back_blocking(&back_blocking);
         tree.mark_two_sided(&two_sided);
-        let emitting: Vec<bool> = (patches.emission.iter())
-            .map(|e| e.iter().any(|&x| x > 0.0))
-            .collect();
-        tree.mark_emitting(&emitting);
         let t1 = Instant::now();
         let links = links::refine(
             &mut tree,
