@@ -10,17 +10,14 @@ use antiradiance::solve::solution::{relative_error, Solution};
 use antiradiance::solve::SolverOptions;
 
 fn error(patches: &Patches, estimate: &Solution, truth: &Solution) -> f64 {
-    let emissive: Vec<bool> = patches
-        .emission
-        .iter()
-        .map(|e| e.iter().any(|&x| x > 0.0))
-        .collect();
-    relative_error(
-        &patches.area,
-        &emissive,
-        &estimate.patch_radiance,
-        &truth.patch_radiance,
-    )
+    error_of(patches, &estimate.patch_radiance, &truth.patch_radiance)
+}
+
+/// The design note's error of per-patch radiances `estimate` against `truth`, over the
+/// non-emissive patches of `patches`.
+fn error_of(patches: &Patches, estimate: &[[f64; 3]], truth: &[[f64; 3]]) -> f64 {
+    let emissive: Vec<bool> = (0..patches.len()).map(|p| patches.is_emitter(p)).collect();
+    relative_error(&patches.area, &emissive, estimate, truth)
 }
 
 #[test]
@@ -318,14 +315,9 @@ fn a_tiny_cube_on_a_floor_splits_nothing() {
     let boxed = build_patches(&generated::cornell_box(), None);
     let alone = solve_hierarchical(&boxed, &options, &Progress::hidden()).unwrap();
     let with = solve_hierarchical(&grit, &options, &Progress::hidden()).unwrap();
-    let n = boxed.len();
-    let emissive: Vec<bool> = (boxed.emission.iter())
-        .map(|e| e.iter().any(|&x| x > 0.0))
-        .collect();
-    let err = relative_error(
-        &boxed.area,
-        &emissive,
-        &with.patch_radiance[..n],
+    let err = error_of(
+        &boxed,
+        &with.patch_radiance[..boxed.len()],
         &alone.patch_radiance,
     );
     eprintln!("the box's triangles with the cube against without: {err:.5}");

@@ -236,9 +236,7 @@ impl ClusterTree {
     /// If no patch is active (the loader rejects such scenes).
     pub fn build(patches: &Patches) -> ClusterTree {
         let mut tree = ClusterTree::build_unmarked(patches);
-        let emitting: Vec<bool> = (patches.emission.iter())
-            .map(|e| e.iter().any(|&x| x > 0.0))
-            .collect();
+        let emitting: Vec<bool> = (0..patches.len()).map(|p| patches.is_emitter(p)).collect();
         tree.mark_emitting(&emitting);
         tree
     }
