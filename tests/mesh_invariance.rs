@@ -172,25 +172,30 @@ fn solver_invariance_jitter_1e_6() {
 
 #[test]
 fn solver_invariance_fan() {
-    assert_as_accurate(VariantKind::Fan);
+    assert_as_accurate(VariantKind::Fan, None);
 }
 
+/// Also its cost: 7.4x the original's links per input triangle while a big triangle and its
+/// smaller neighbour could split each other in turn down to the resolution floor; 3.5x now.
 #[test]
 fn solver_invariance_random() {
-    assert_as_accurate(VariantKind::Random);
+    assert_as_accurate(VariantKind::Random, Some(5.0));
 }
 
+/// Also its cost: 11.9x the original's links per input triangle while the floor and the walls
+/// split each other in turn at their T-junctions (2,612 elements); 1.6x now (317 elements).
 #[test]
 fn solver_invariance_tjunction() {
-    assert_as_accurate(VariantKind::Tjunction);
+    assert_as_accurate(VariantKind::Tjunction, Some(2.0));
 }
 
 /// A re-triangulation of the Cornell box is solved as accurately as the original: its error
 /// against the path tracer (per input triangle, mapped back) is at most the original's plus
 /// 0.75 points, and their difference is under 2.5%. (The 46-triangle box is resolved by
 /// on-demand splits, each solve about 1% from the truth, so two triangulations differ by
-/// 1-2%: docs/mesh_quality.md.)
-fn assert_as_accurate(kind: VariantKind) {
+/// 1-2%: docs/mesh_quality.md.) With `max_links_ratio`, the variant's links per input
+/// triangle are also under that multiple of the original's.
+fn assert_as_accurate(kind: VariantKind, max_links_ratio: Option<f64>) {
     use antiradiance::progress::Progress;
     use antiradiance::reference::{solve_reference, ReferenceOptions};
     let path = cornell_path();
@@ -238,6 +243,23 @@ fn assert_as_accurate(kind: VariantKind) {
         "cornell {}: error {e_variant} vs original {e_original}, difference {difference}",
         kind.name()
     );
+    let per_triangle = |s: &Solution, n: usize| s.stats.links as f64 / n as f64;
+    let ratio = per_triangle(&varied, back.len()) / per_triangle(&original, input.len());
+    eprintln!(
+        "cornell {}: links {} -> {} ({} -> {} triangles), {ratio:.2}x per input triangle",
+        kind.name(),
+        original.stats.links,
+        varied.stats.links,
+        input.len(),
+        back.len()
+    );
+    if let Some(max) = max_links_ratio {
+        assert!(
+            ratio < max,
+            "cornell {}: {ratio:.2}x the original's links per input triangle (allowed {max}x)",
+            kind.name()
+        );
+    }
 }
 
 // The seed room (9,264 triangles, a few seconds per solve) when the meshes are present: its

@@ -48,6 +48,9 @@ pub struct Node {
     pub split_depth: u8,
     /// For leaves: the triangle's corners (counter-clockwise = front).
     pub corners: Tri,
+    /// For leaves: the radius of the smallest piece [`ClusterTree::split_leaf`] would cut it
+    /// into (about `radius / 2`); 0 for clusters.
+    pub piece_radius: f64,
     /// Elements below this node, `elements.0 .. elements.1` (set by [`ClusterTree::finalize`]).
     pub elements: (u32, u32),
     /// Cone of the normals below: unit axis (zero when the normals cancel out).
@@ -88,13 +91,20 @@ pub struct ClusterTree {
     pub bvh_time: Duration,
 }
 
+/// The leaf node of triangle `corners`, piece of `patch` (a placeholder the cluster build
+/// overwrites when `patch` is [`NONE`]: then no piece radius is computed).
 fn leaf_node(corners: Tri, patch: u32, parent: u32, split_depth: u8) -> Node {
     let normal = geometry::normal(&corners).unwrap_or(DVec3::Z);
     let center = geometry::centroid(&corners);
-    let radius = corners
-        .iter()
-        .map(|c| (*c - center).length())
-        .fold(0.0, f64::max);
+    let radius = triangle_radius(&corners);
+    let piece_radius = if patch == NONE {
+        0.0
+    } else {
+        geometry::split_in_pieces(&corners)
+            .iter()
+            .map(triangle_radius)
+            .fold(f64::INFINITY, f64::min)
+    };
     let lo = corners[0].min(corners[1]).min(corners[2]);
     let hi = corners[0].max(corners[1]).max(corners[2]);
     // Over a triangle, the mean of |y - centroid|^2 is the sum over its corners / 12.
@@ -117,6 +127,7 @@ fn leaf_node(corners: Tri, patch: u32, parent: u32, split_depth: u8) -> Node {
         patch,
         split_depth,
         corners,
+        piece_radius,
         elements: (0, 0),
         cone_axis: normal,
         cone_cos: 1.0,
@@ -125,6 +136,15 @@ fn leaf_node(corners: Tri, patch: u32, parent: u32, split_depth: u8) -> Node {
         two_sided: false,
         height: 0.0,
     }
+}
+
+/// The radius of a leaf's bounding sphere: the largest distance of a corner from the centroid.
+fn triangle_radius(corners: &Tri) -> f64 {
+    let center = geometry::centroid(corners);
+    corners
+        .iter()
+        .map(|c| (*c - center).length())
+        .fold(0.0, f64::max)
 }
 
 /// Lowest and highest signed distance of node `node` to the plane `n . x = d`: over its box's
@@ -330,8 +350,7 @@ impl ClusterTree {
             };
             let child = self.nodes.len() as u32;
             for _ in 0..2 {
-                let mut c = leaf_node(corners[active[first] as usize], NONE, node, 0);
-                c.patch = NONE;
+                let c = leaf_node(corners[active[first] as usize], NONE, node, 0);
                 self.nodes.push(c);
             }
             let n = &mut self.nodes[node as usize];

@@ -290,17 +290,21 @@ impl Traversal<'_> {
             }
         }
         // Too coarse: split the larger node. A leaf triangle is split (into sub-triangles) only
-        // when it is much larger than its partner and than the gap between them (a coarse floor
-        // under a small object), above the resolution floor, never among similar neighbours,
-        // and never for a faint pair (the light it carries is within the flux rule's share
-        // whatever its geometry: its leaves are coupled exactly as they are).
+        // when even its smallest piece would be as large as its partner, and it is larger than
+        // the gap between them (a coarse floor under a small object), above the resolution
+        // floor, never among similar neighbours, and never for a faint pair (the light it
+        // carries is within the flux rule's share whatever its geometry: its leaves are coupled
+        // exactly as they are). Measured by the pieces rather than by twice the partner's
+        // radius, no piece is then split back because of its partner: two neighbours whose
+        // pieces shrink by different factors (a sliver's by more than 2) cannot split each
+        // other in turn down to the resolution floor.
         let faint = self.faint(sn, rn);
         let leaf_splittable = |n: &crate::hierarchy::Node, other: &crate::hierarchy::Node| {
             params.epsilon > 0.0
                 && !faint
                 && n.split_depth < params.max_split_depth
                 && n.radius > params.min_radius
-                && n.radius > 2.0 * other.radius
+                && n.piece_radius >= other.radius
                 && n.radius > gap.max(0.0)
         };
         let s_can = !sn.is_leaf() || leaf_splittable(sn, rn);
