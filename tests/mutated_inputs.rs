@@ -1,23 +1,33 @@
-//! Mutated scene files never panic: valid OBJ, MTL, glTF and GLB inputs, changed at random
-//! (bytes flipped, cut, repeated, numbers replaced by extreme values), are each either loaded
-//! or refused with an error. A fixed seed makes the cases reproducible; `MUTATION_CASES` sets
-//! how many per input (default 500; a longer run: `MUTATION_CASES=20000 cargo test --release
-//! --test mutated_inputs`).
+//! Mutated scene files never panic, a property test (proptest): valid OBJ, MTL, PNG, glTF and
+//! GLB inputs, changed by one to three random mutations (bytes flipped, cut, repeated, removed,
+//! replaced, numbers replaced by extreme values), are each either loaded into a scene whose
+//! corners are finite, albedos in [0, 1) and emission finite and non-negative, or refused with
+//! a one-line error. A failing case is shrunk to its fewest, smallest mutations and printed.
+//! `PROPTEST_CASES` sets the cases per input (default 600, 3,000 in all; a longer run:
+//! `PROPTEST_CASES=20000 cargo test --release --test mutated_inputs`).
 
 mod gltf_common;
 
-use std::path::Path;
-
-use antiradiance::geometry::sampling::Rng;
 use antiradiance::scene::{load_scene, SceneOptions};
 use gltf_common::{png, Doc};
+use proptest::prelude::*;
 use serde_json::json;
 
-fn cases() -> usize {
-    std::env::var("MUTATION_CASES")
+/// Cases per input when `PROPTEST_CASES` is not set.
+const DEFAULT_CASES: u32 = 600;
+
+fn config() -> ProptestConfig {
+    let cases = std::env::var("PROPTEST_CASES")
         .ok()
         .and_then(|v| v.parse().ok())
-        .unwrap_or(500)
+        .unwrap_or(DEFAULT_CASES);
+    ProptestConfig {
+        cases,
+        // The library's own errors are values, not panics: a panic is the failure looked for,
+        // and its message is enough.
+        failure_persistence: None,
+        ..ProptestConfig::default()
+    }
 }
 
 const NUMBERS: [&str; 10] = [
@@ -33,26 +43,44 @@ const NUMBERS: [&str; 10] = [
     "-2147483648",
 ];
 
-/// One random change of `bytes`.
-fn mutate(bytes: &[u8], rng: &mut Rng) -> Vec<u8> {
+/// One change of a file: `kind` (0..6) at `at` (a fraction of its length), with `value`.
+#[derive(Clone, Debug)]
+struct Mutation {
+    kind: u8,
+    at: f64,
+    value: u8,
+}
+
+fn mutation() -> impl Strategy<Value = Mutation> {
+    (0u8..6, 0.0f64..1.0, any::<u8>()).prop_map(|(kind, at, value)| Mutation { kind, at, value })
+}
+
+/// One to three changes.
+fn mutations() -> impl Strategy<Value = Vec<Mutation>> {
+    prop::collection::vec(mutation(), 1..4)
+}
+
+/// `bytes` changed by `m`.
+fn mutate(bytes: &[u8], m: &Mutation) -> Vec<u8> {
     let mut out = bytes.to_vec();
     if out.is_empty() {
         return out;
     }
-    let at = rng.below(out.len() as u64) as usize;
-    match rng.below(6) {
-        0 => out[at] ^= 1 << rng.below(8),
+    let at = ((m.at * out.len() as f64) as usize).min(out.len() - 1);
+    let v = m.value as usize;
+    match m.kind {
+        0 => out[at] ^= 1 << (v % 8),
         1 => out.truncate(at),
         2 => {
-            let end = (at + 1 + rng.below(16) as usize).min(out.len());
+            let end = (at + 1 + v % 16).min(out.len());
             let piece = out[at..end].to_vec();
             out.splice(at..at, piece);
         }
         3 => {
-            let end = (at + 1 + rng.below(8) as usize).min(out.len());
+            let end = (at + 1 + v % 8).min(out.len());
             out.drain(at..end);
         }
-        4 => out[at] = rng.below(256) as u8,
+        4 => out[at] = m.value,
         _ => {
             // Replace the number starting at or after `at` by an extreme one.
             let start = (at..out.len()).find(|&i| out[i].is_ascii_digit());
@@ -60,74 +88,61 @@ fn mutate(bytes: &[u8], rng: &mut Rng) -> Vec<u8> {
                 let e = (s..out.len())
                     .find(|&i| !(out[i].is_ascii_digit() || out[i] == b'.'))
                     .unwrap_or(out.len());
-                let n = NUMBERS[rng.below(NUMBERS.len() as u64) as usize];
-                out.splice(s..e, n.bytes());
+                out.splice(s..e, NUMBERS[v % NUMBERS.len()].bytes());
             }
         }
     }
     out
 }
 
-/// Writes each mutation of `file` (the other files of `dir` kept as they are) and loads `entry`.
-fn run(dir: &Path, entry: &str, file: &str, original: &[u8], seed: u64) {
-    let mut rng = Rng::new(seed, 0);
-    for case in 0..cases() {
-        let mut bytes = original.to_vec();
-        for _ in 0..1 + rng.below(3) {
-            bytes = mutate(&bytes, &mut rng);
-        }
-        std::fs::write(dir.join(file), &bytes).unwrap();
-        let path = dir.join(entry);
-        let result = std::panic::catch_unwind(|| load_scene(&path, &SceneOptions::default()));
-        match result {
-            Ok(Ok(scene)) => {
-                for t in 0..scene.len() {
-                    assert!(
-                        scene.corners(t).iter().all(|p| p.is_finite()),
-                        "{file} case {case}"
-                    );
-                    assert!(
-                        scene.albedo[t].iter().all(|a| (0.0..1.0).contains(a)),
-                        "{file} case {case}"
-                    );
-                    assert!(
-                        scene.emission[t].iter().all(|e| e.is_finite() && *e >= 0.0),
-                        "{file} case {case}"
-                    );
-                }
-            }
-            Ok(Err(e)) => {
-                let text = e.to_string();
-                assert!(
-                    !text.contains('\n'),
-                    "{file} case {case}: not one line: {text}"
-                );
-            }
-            Err(_) => {
-                std::fs::write(dir.join(format!("panic-{file}")), &bytes).unwrap();
-                panic!(
-                    "{file} case {case} panicked (input kept as panic-{file} in {})",
-                    dir.display()
-                );
-            }
-        }
+/// Writes `files` into a new directory, `target` changed by `changes`, and loads `entry`:
+/// an error if the load panicked, returned a multi-line error, or a scene out of range.
+fn check(
+    files: &[(&str, &[u8])],
+    entry: &str,
+    target: &str,
+    changes: &[Mutation],
+) -> Result<(), TestCaseError> {
+    let dir = tempfile::tempdir().unwrap();
+    for &(name, bytes) in files {
+        let bytes = if name == target {
+            changes.iter().fold(bytes.to_vec(), |b, m| mutate(&b, m))
+        } else {
+            bytes.to_vec()
+        };
+        std::fs::write(dir.path().join(name), bytes).unwrap();
     }
-    std::fs::write(dir.join(file), original).unwrap();
+    let path = dir.path().join(entry);
+    let loaded = std::panic::catch_unwind(|| load_scene(&path, &SceneOptions::default()));
+    match loaded {
+        Ok(Ok(scene)) => {
+            for t in 0..scene.len() {
+                prop_assert!(scene.corners(t).iter().all(|p| p.is_finite()));
+                prop_assert!(scene.albedo[t].iter().all(|a| (0.0..1.0).contains(a)));
+                prop_assert!(scene.emission[t].iter().all(|e| e.is_finite() && *e >= 0.0));
+            }
+            Ok(())
+        }
+        Ok(Err(e)) => {
+            let text = e.to_string();
+            prop_assert!(!text.contains('\n'), "not one line: {}", text);
+            Ok(())
+        }
+        Err(_) => Err(TestCaseError::fail(format!("loading {entry} panicked"))),
+    }
 }
 
-#[test]
-fn mutated_obj_and_mtl_files_never_panic() {
-    let dir = tempfile::tempdir().unwrap();
-    let obj = b"mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0 1\nvt 0 0\nvt 1 0\nvt 1 1\nusemtl a\nf 1/1 2/2 3/3 4\nusemtl b\nf -1 -2 -3\n";
-    let mtl =
-        b"newmtl a\nKd 0.5 0.25 0.125\nmap_Kd -s 2 2 t.png\nnewmtl b\nKe 1 2 3\nKd 0.1 0.2 0.3\n";
-    std::fs::write(dir.path().join("s.obj"), obj).unwrap();
-    std::fs::write(dir.path().join("m.mtl"), mtl).unwrap();
-    let t = png(2, 2, &[[255, 0, 0], [0, 255, 0], [0, 0, 255], [9, 9, 9]]);
-    std::fs::write(dir.path().join("t.png"), &t).unwrap();
-    run(dir.path(), "s.obj", "s.obj", obj, 1);
-    run(dir.path(), "s.obj", "m.mtl", mtl, 2);
-    run(dir.path(), "s.obj", "t.png", &t, 3);
+const OBJ: &[u8] = b"mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0 1\nvt 0 0\nvt 1 0\nvt 1 1\nusemtl a\nf 1/1 2/2 3/3 4\nusemtl b\nf -1 -2 -3\n";
+const MTL: &[u8] =
+    b"newmtl a\nKd 0.5 0.25 0.125\nmap_Kd -s 2 2 t.png\nnewmtl b\nKe 1 2 3\nKd 0.1 0.2 0.3\n";
+
+/// The OBJ, its MTL and the texture it names.
+fn obj_files(texture: &[u8]) -> [(&'static str, &[u8]); 3] {
+    [("s.obj", OBJ), ("m.mtl", MTL), ("t.png", texture)]
+}
+
+fn texture() -> Vec<u8> {
+    png(2, 2, &[[255, 0, 0], [0, 255, 0], [0, 0, 255], [9, 9, 9]])
 }
 
 fn textured_doc() -> (Doc, serde_json::Value) {
@@ -173,12 +188,54 @@ fn textured_doc() -> (Doc, serde_json::Value) {
     (doc, rest)
 }
 
-#[test]
-fn mutated_gltf_and_glb_files_never_panic() {
-    let dir = tempfile::tempdir().unwrap();
+/// The textured document as GLB and as glTF with an embedded buffer.
+fn gltf_files() -> (Vec<u8>, Vec<u8>) {
     let (doc, rest) = textured_doc();
     let glb = doc.glb_bytes(rest.clone());
-    run(dir.path(), "s.glb", "s.glb", &glb, 4);
     let gltf = serde_json::to_vec_pretty(&doc.json(rest, true)).unwrap();
-    run(dir.path(), "s.gltf", "s.gltf", &gltf, 5);
+    (glb, gltf)
+}
+
+proptest! {
+    #![proptest_config(config())]
+
+    #[test]
+    fn mutated_obj_files_never_panic(changes in mutations()) {
+        check(&obj_files(&texture()), "s.obj", "s.obj", &changes)?;
+    }
+
+    #[test]
+    fn mutated_mtl_files_never_panic(changes in mutations()) {
+        check(&obj_files(&texture()), "s.obj", "m.mtl", &changes)?;
+    }
+
+    #[test]
+    fn mutated_textures_never_panic(changes in mutations()) {
+        check(&obj_files(&texture()), "s.obj", "t.png", &changes)?;
+    }
+
+    #[test]
+    fn mutated_glb_files_never_panic(changes in mutations()) {
+        let (glb, _) = gltf_files();
+        check(&[("s.glb", &glb)], "s.glb", "s.glb", &changes)?;
+    }
+
+    #[test]
+    fn mutated_gltf_files_never_panic(changes in mutations()) {
+        let (_, gltf) = gltf_files();
+        check(&[("s.gltf", &gltf)], "s.gltf", "s.gltf", &changes)?;
+    }
+}
+
+/// The mutations reach every branch: each kind changes a file (a check on the test itself).
+#[test]
+fn every_mutation_kind_changes_the_obj() {
+    for kind in 0..6 {
+        let m = Mutation {
+            kind,
+            at: 0.3,
+            value: 7,
+        };
+        assert_ne!(mutate(OBJ, &m), OBJ, "kind {kind}");
+    }
 }
