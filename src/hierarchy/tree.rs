@@ -300,13 +300,7 @@ impl ClusterTree {
         let centroid: Vec<DVec3> = (0..patches.len())
             .map(|p| geometry::centroid(&corners[p]))
             .collect();
-        let radius = |p: u32| {
-            let c = centroid[p as usize];
-            corners[p as usize]
-                .iter()
-                .map(|v| (*v - c).length())
-                .fold(0.0, f64::max)
-        };
+        let radius = |p: u32| triangle_radius(&corners[p as usize]);
         self.nodes.clear();
         self.nodes
             .push(leaf_node(corners[active[0] as usize], NONE, NONE, 0));
