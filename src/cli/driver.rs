@@ -134,6 +134,12 @@ pub fn load(args: &SceneArgs, timings: &mut Timings) -> Result<Loaded> {
     scene
         .lights
         .extend(args.lights.iter().chain(&args.sky).copied());
+    if !scene.lights.is_empty() {
+        // Lit by `--light` or `--sky`: the file's lack of emitters is no longer a finding.
+        scene
+            .warnings
+            .retain(|w| w.kind != antiradiance::error::WarningKind::NoEmitter);
+    }
     if args.two_sided {
         scene.set_two_sided();
     }

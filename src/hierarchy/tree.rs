@@ -578,6 +578,46 @@ impl ClusterTree {
         first
     }
 
+    /// Splits every leaf whose radius exceeds `ratio` times its distance from one of `points`
+    /// (point and spot lights, unit frame) that lies in front of it (either side of a two-sided
+    /// leaf), and its pieces in turn, while above `min_radius` and under `max_depth` splits: a
+    /// point light's irradiance varies over a triangle by about its size over its distance, and
+    /// each piece is then given its own direct light. Call before refinement. Returns the
+    /// number of leaves split.
+    pub fn split_toward_points(
+        &mut self,
+        points: &[DVec3],
+        ratio: f64,
+        max_depth: u8,
+        min_radius: f64,
+    ) -> usize {
+        if points.is_empty() {
+            return 0;
+        }
+        let near = |n: &Node| {
+            let (normal, d) = n.plane.unwrap_or((n.cone_axis, n.cone_axis.dot(n.center)));
+            points.iter().any(|&x| {
+                let height = normal.dot(x) - d;
+                (height > 0.0 || n.two_sided) && n.radius > ratio * (x - n.center).length()
+            })
+        };
+        let mut todo: Vec<u32> = (0..self.nodes.len() as u32)
+            .filter(|&i| self.nodes[i as usize].is_leaf())
+            .collect();
+        let mut splits = 0;
+        while let Some(i) = todo.pop() {
+            let n = &self.nodes[i as usize];
+            if n.patch == NONE || n.split_depth >= max_depth || n.radius <= min_radius || !near(n) {
+                continue;
+            }
+            let first = self.split_leaf(i);
+            splits += 1;
+            let count = self.nodes[i as usize].child_count as u32;
+            todo.extend(first..first + count);
+        }
+        splits
+    }
+
     /// Marks the leaves of patches with `per_patch[p]` as blocking light at their back, and
     /// every ancestor of such a leaf. Call before refinement (pieces split later inherit it).
     ///
@@ -731,6 +771,42 @@ mod tests {
         tris.push([f(-2.0, -2.0), f(2.0, 2.0), f(2.0, -2.0)]);
         let n = tris.len();
         Scene::from_triangles(&tris, &vec![[0.5; 3]; n], &vec![[0.0; 3]; n])
+    }
+
+    /// A floor of two triangles with a point above one corner: the leaves near it are split
+    /// until each is small beside its distance (or at the depth limit), those far from it keep
+    /// their size, and a point below the floor (behind it) splits nothing.
+    #[test]
+    fn leaves_split_toward_a_point_in_front_only() {
+        let f = |x: f64, z: f64| DVec3::new(x, 0.0, z);
+        let tris = [
+            [f(0.0, 0.0), f(0.0, 1.0), f(1.0, 1.0)],
+            [f(0.0, 0.0), f(1.0, 1.0), f(1.0, 0.0)],
+        ];
+        let scene = Scene::from_triangles(&tris, &[[0.5; 3]; 2], &[[0.0; 3]; 2]);
+        let patches = build_patches(&scene, None);
+        let build = || ClusterTree::build(&patches);
+        // Unit frame: the floor's corner (0, 0, 0) and a point 0.05 above it, scene units.
+        let unit = |x: DVec3| patches.frame.unit_from_world(x);
+        let light = unit(DVec3::new(0.0, 0.05, 0.0));
+        let mut tree = build();
+        let splits = tree.split_toward_points(&[light], 0.5, 4, 0.0);
+        tree.finalize();
+        tree.validate().unwrap();
+        assert!(splits > 0);
+        let leaves: Vec<&Node> = tree.nodes.iter().filter(|n| n.is_leaf()).collect();
+        for n in &leaves {
+            let near = n.radius > 0.5 * (light - n.center).length();
+            assert!(!near || n.split_depth == 4, "{n:?}");
+        }
+        let depths: Vec<u8> = leaves.iter().map(|n| n.split_depth).collect();
+        assert!(
+            depths.contains(&4) && depths.iter().any(|&d| d < 2),
+            "{depths:?}"
+        );
+        let mut behind = build();
+        let below = unit(DVec3::new(0.0, -0.05, 0.0));
+        assert_eq!(behind.split_toward_points(&[below], 0.5, 4, 0.0), 0);
     }
 
     #[test]

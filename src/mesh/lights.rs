@@ -160,14 +160,7 @@ pub fn light_source_faces(
             let stream = if back { p as u64 | 1 << 63 } else { p as u64 };
             let mut rng = Rng::new(seed, stream);
             let h = irradiance(patches, rays, p, back, light, sky_rays, &mut rng);
-            [0, 1, 2].map(|c| {
-                let d = rho[c] * h[c] / PI;
-                if d.is_finite() {
-                    d.max(0.0)
-                } else {
-                    0.0
-                }
-            })
+            reflected(rho, h)
         })
         .collect()
 }
@@ -188,6 +181,90 @@ fn irradiance(
     } else {
         (patches.corners[p], patches.normal[p])
     };
+    irradiance_over(rays, &tri, n, p, light, sky_rays, rng)
+}
+
+/// The reflected direct radiance from `lights` (unit frame, as [`direct_source`]) of each of
+/// `faces`, given as (corners, normal, patch): pieces of patches (the hierarchical solver's
+/// elements, or their back faces with the corners reversed and the normal negated), each with
+/// its patch's albedo and its own random streams. Over a patch lit unevenly (a point light
+/// close by) its pieces get their own light where [`direct_source`] gives the patch's mean.
+pub fn faces_source(
+    patches: &Patches,
+    lights: &[Light],
+    faces: &[(crate::geometry::Tri, DVec3, u32)],
+) -> Vec<[f64; 3]> {
+    let mut total = vec![[0.0; 3]; faces.len()];
+    if lights.is_empty() {
+        return total;
+    }
+    let rays = RayScene::new(&patches.corners, &patches.active);
+    for (k, light) in lights.iter().enumerate() {
+        for (sum, d) in total
+            .iter_mut()
+            .zip(light_faces_source(patches, &rays, light, k, faces))
+        {
+            for c in 0..3 {
+                sum[c] += d[c];
+            }
+        }
+    }
+    total
+}
+
+/// [`faces_source`] of one light, `index` its place among the scene's lights (which picks its
+/// random streams), with shadow rays against `rays` (the active patches): the same numbers as
+/// its share of [`faces_source`], so that a relighter can recompute one light alone.
+pub fn light_faces_source(
+    patches: &Patches,
+    rays: &RayScene,
+    light: &Light,
+    index: usize,
+    faces: &[(crate::geometry::Tri, DVec3, u32)],
+) -> Vec<[f64; 3]> {
+    let sky_rays = (SKY_RAY_BUDGET / faces.len().max(1)).clamp(MIN_SKY_RAYS, MAX_SKY_RAYS);
+    let seed = SEED.wrapping_add(index as u64);
+    faces
+        .par_iter()
+        .enumerate()
+        .map(|(i, (tri, n, p))| {
+            let rho = patches.albedo[*p as usize];
+            if rho.iter().all(|&r| r <= 0.0) {
+                return [0.0; 3];
+            }
+            let mut rng = Rng::new(seed, i as u64 | 1 << 62);
+            reflected(
+                rho,
+                irradiance_over(rays, tri, *n, *p as usize, light, sky_rays, &mut rng),
+            )
+        })
+        .collect()
+}
+
+/// The reflected radiance `rho * h / pi` of irradiance `h`, non-negative and finite.
+fn reflected(rho: [f64; 3], h: [f64; 3]) -> [f64; 3] {
+    [0, 1, 2].map(|c| {
+        let d = rho[c] * h[c] / PI;
+        if d.is_finite() {
+            d.max(0.0)
+        } else {
+            0.0
+        }
+    })
+}
+
+/// Mean direct irradiance from `light` (unit frame) over triangle `tri` with normal `n`, a piece
+/// of patch `p` (which its shadow rays skip).
+fn irradiance_over(
+    rays: &RayScene,
+    tri: &crate::geometry::Tri,
+    n: DVec3,
+    p: usize,
+    light: &Light,
+    sky_rays: usize,
+    rng: &mut Rng,
+) -> [f64; 3] {
+    let tri = *tri;
     match light {
         Light::Sky { radiance } => {
             let k = sky_rays.isqrt();

@@ -206,6 +206,20 @@ impl Patches {
         e
     }
 
+    /// The emission of the back faces: a two-sided patch emits from both faces; one-sided
+    /// patches get 0.
+    pub fn emission_back(&self) -> Vec<[f64; 3]> {
+        (0..self.len())
+            .map(|p| {
+                if self.is_two_sided(p) {
+                    self.emission[p]
+                } else {
+                    [0.0; 3]
+                }
+            })
+            .collect()
+    }
+
     /// [`Patches::emission_and_source`] of the back faces: a two-sided patch emits from both
     /// faces and its back has its own direct light (`source_back`); one-sided patches get 0.
     pub fn emission_and_source_back(&self) -> Vec<[f64; 3]> {

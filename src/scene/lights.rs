@@ -169,6 +169,14 @@ impl Light {
         light
     }
 
+    /// The position of a point or spot light; `None` for the sun and the sky.
+    pub fn position(&self) -> Option<DVec3> {
+        match *self {
+            Light::Point { position, .. } | Light::Spot { position, .. } => Some(position),
+            Light::Sun { .. } | Light::Sky { .. } => None,
+        }
+    }
+
     /// For a delta light (point, spot, sun): the unit direction from `x` towards the light,
     /// the distance to it (infinite for the sun) and the irradiance it gives a surface at `x`
     /// facing it (`I a / r^2` or `E`), without visibility. `None` for the sky and for a point on

@@ -133,7 +133,7 @@ pub fn load_obj(path: &Path, options: &SceneOptions) -> Result<Scene> {
             WarningKind::NoEmitter,
             path,
             None,
-            "no emitting triangle (no Ke in materials, no SceneOptions::emit_above match); the answer is all zero",
+            "no emitting triangle (no Ke in materials, no SceneOptions::emit_above match) and no light; the answer is all zero",
         ));
     }
     scene.warnings = warnings;

@@ -133,9 +133,22 @@ pub fn solve_hierarchical_direct(
     }
     prepared.note_memory(bytes, None);
     let mut source = direct.reflected(&receivers, progress);
-    let (fronts, backs) = source.split_at_mut(n);
-    add_light_source(&patches.source, &receivers[..n], fronts);
-    add_light_source(&patches.source_back, &receivers[n..], backs);
+    if patches.lights.is_empty() {
+        let (fronts, backs) = source.split_at_mut(n);
+        add_light_source(&patches.source, &receivers[..n], fronts);
+        add_light_source(&patches.source_back, &receivers[n..], backs);
+    } else {
+        // The analytic lights' direct light per face, not the patch's mean: an element near a
+        // point light gets its own.
+        for (d, l) in source
+            .iter_mut()
+            .zip(prepared.light_source_of_faces(patches))
+        {
+            for c in 0..3 {
+                d[c] += l[c];
+            }
+        }
+    }
     drop(direct);
     prepared.timings.direct = t_direct.elapsed().as_secs_f64();
     let (reflected, state) = prepared.solve_with_source(patches, &source, None, progress);

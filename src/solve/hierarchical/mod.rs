@@ -360,13 +360,36 @@ impl Prepared {
         (0..self.element_count()).map(|e| self.element(e))
     }
 
-    /// Solves with the patches' own emission.
+    /// Solves with the patches' own emission and the direct light of their analytic lights
+    /// (per face, [`Prepared::light_source_of_faces`]).
     pub fn solve(&mut self, patches: &Patches, progress: &Progress) -> (Solution, ElementState) {
-        let source = self.element_source_sides(
-            &patches.emission_and_source(),
-            &patches.emission_and_source_back(),
-        );
+        let source = if patches.lights.is_empty() {
+            self.element_source_sides(
+                &patches.emission_and_source(),
+                &patches.emission_and_source_back(),
+            )
+        } else {
+            let mut source = self.element_source_sides(&patches.emission, &patches.emission_back());
+            for (s, l) in source.iter_mut().zip(self.light_source_of_faces(patches)) {
+                for c in 0..3 {
+                    s[c] += l[c];
+                }
+            }
+            source
+        };
         self.solve_with_source(patches, &source, None, progress)
+    }
+
+    /// The reflected direct light of `patches.lights` (normalized units) on every face
+    /// ([`Prepared::faces`]), each piece of a patch with its own (`mesh::lights::faces_source`):
+    /// near a point light the pieces differ, where [`Patches::source`] holds only the patch's
+    /// mean. All zero without lights.
+    pub fn light_source_of_faces(&self, patches: &Patches) -> Vec<[f64; 3]> {
+        let faces: Vec<_> = self
+            .faces()
+            .map(|f| (f.corners, f.normal, f.patch))
+            .collect();
+        crate::mesh::lights::faces_source(patches, &patches.lights, &faces)
     }
 
     /// Solves for a given per-patch emission (normalized units, as in `Patches::emission`),
@@ -411,6 +434,38 @@ impl Prepared {
         let backs =
             (self.back_faces.iter()).map(|&e| patch_back[self.elem_patch[e as usize] as usize]);
         fronts.chain(backs).collect()
+    }
+
+    /// The area-weighted means per patch (of `patches` patches) of values given per face
+    /// ([`Prepared::faces`]): over the fronts, and over the back faces (0 for a patch without
+    /// faces there, and everywhere when `per_face` is empty).
+    pub fn patch_means_of_faces(
+        &self,
+        per_face: &[[f64; 3]],
+        patches: usize,
+    ) -> (Vec<[f64; 3]>, Vec<[f64; 3]>) {
+        if per_face.is_empty() {
+            return (vec![[0.0; 3]; patches], vec![[0.0; 3]; patches]);
+        }
+        let n = self.element_count();
+        let front = crate::mesh::patch_means(
+            patches,
+            (0..n).map(|e| (self.elem_patch[e] as usize, self.elem_area[e], per_face[e])),
+        );
+        let back = crate::mesh::patch_means(
+            patches,
+            self.back_faces.iter().enumerate().map(|(k, &e)| {
+                let e = e as usize;
+                (
+                    self.elem_patch[e] as usize,
+                    self.elem_area[e],
+                    per_face[n + k],
+                )
+            }),
+        );
+        let zero =
+            |v: Vec<Option<[f64; 3]>>| v.into_iter().map(|x| x.unwrap_or([0.0; 3])).collect();
+        (zero(front), zero(back))
     }
 
     /// Solves `B_e = source_e + rho_e H_e(B)` for a per-element source radiance (normalized

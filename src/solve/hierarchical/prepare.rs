@@ -3,6 +3,10 @@
 
 use super::*;
 
+/// A leaf is split while its radius exceeds this share of its distance from a point or spot
+/// light in front of it ([`ClusterTree::split_toward_points`]).
+pub const LIGHT_SPLIT_RATIO: f64 = 0.5;
+
 impl Prepared {
     /// Builds the tree and refines the links for `patches` within the memory limit of
     /// `options` ([`SolverOptions::memory_limit_bytes`], see [`crate::solve::budget`]): a model whose
@@ -99,6 +103,19 @@ impl Prepared {
         } = model::Backs::of(patches, options);
         tree.mark_back_blocking(&back_blocking);
         tree.mark_two_sided(&two_sided);
+        {
+            // Every face gets its own direct light from point and spot lights
+            // (`Prepared::light_source_of_faces`): elements near them are made small enough
+            // for it to vary between them.
+            let points: Vec<_> = patches.lights.iter().filter_map(|l| l.position()).collect();
+            let params = link_params(options);
+            tree.split_toward_points(
+                &points,
+                LIGHT_SPLIT_RATIO,
+                params.max_split_depth,
+                params.min_radius,
+            );
+        }
         let t1 = Instant::now();
         let links = links::refine(
             &mut tree,

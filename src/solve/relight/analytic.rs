@@ -61,26 +61,40 @@ impl Relighter {
         }
         let start = Instant::now();
         let rays = RayScene::new(&self.patches.corners, &self.patches.active);
+        // Per face of the solver, as the cold solve's exact direct light gives them
+        // (`mesh::lights::faces_source`).
+        let faces: Vec<_> = self
+            .prepared
+            .faces()
+            .map(|f| (f.corners, f.normal, f.patch))
+            .collect();
         for (k, a) in self.analytic.iter_mut().enumerate() {
             if a.unit_source.is_none() {
                 let unit = a
                     .light
                     .with_colour([1.0; 3])
                     .to_unit(&self.patches.frame, 1.0);
-                a.unit_source = Some(mesh::lights::light_source(&self.patches, &rays, &unit, k));
+                a.unit_source = Some(mesh::lights::light_faces_source(
+                    &self.patches,
+                    &rays,
+                    &unit,
+                    k,
+                    &faces,
+                ));
             }
         }
         start.elapsed().as_secs_f64()
     }
 
-    /// The analytic lights' reflected direct radiance per patch, scene units (empty when
-    /// `lighting` leaves them out or the scene has none). Lights whose direct light is not
-    /// computed yet ([`Relighter::update_light_sources`]) are left out.
+    /// The analytic lights' reflected direct radiance per face of the solver
+    /// ([`crate::solve::hierarchical::Prepared::faces`]), scene units (empty when `lighting`
+    /// leaves them out or the scene has none). Lights whose direct light is not computed yet
+    /// ([`Relighter::update_light_sources`]) are left out.
     pub(super) fn light_source(&self, lighting: Lighting) -> Vec<[f64; 3]> {
         if lighting == Lighting::EmissionOnly || self.analytic.is_empty() {
             return Vec::new();
         }
-        let mut total = vec![[0.0f64; 3]; self.patches.len()];
+        let mut total = vec![[0.0f64; 3]; self.prepared.face_count()];
         for a in &self.analytic {
             let colour = a.light.colour();
             let Some(unit) = a.unit_source.as_ref() else {

@@ -21,13 +21,21 @@ impl Relighter {
     }
 
     /// Sets the patches' emission, source and lights to the current ones over the current
-    /// normalization scale (`source`: the analytic lights' direct light, scene units, or empty).
+    /// normalization scale (`source`: the analytic lights' direct light per face of the
+    /// solver, scene units, or empty; the patches get its mean over their faces, front and
+    /// back).
     pub(super) fn sync_patches(&mut self, source: &[[f64; 3]], lighting: Lighting) {
         let scale = self.patches.emission_scale;
         for (p, &t) in self.patches.parent.iter().enumerate() {
             self.patches.emission[p] = self.emission[t as usize].map(|x| x / scale);
         }
-        self.patches.source = source.iter().map(|s| s.map(|x| x / scale)).collect();
+        let (front, back) = self
+            .prepared
+            .patch_means_of_faces(source, self.patches.len());
+        self.patches.source = front.iter().map(|s| s.map(|x| x / scale)).collect();
+        if self.patches.has_two_sided() {
+            self.patches.source_back = back.iter().map(|s| s.map(|x| x / scale)).collect();
+        }
         self.patches.lights = match lighting {
             Lighting::All => self
                 .analytic
@@ -112,10 +120,16 @@ impl Relighter {
             warm = None;
         }
         self.sync_patches(&source, lighting);
-        let elem_source = self.prepared.element_source_sides(
-            &self.patches.emission_and_source(),
-            &self.patches.emission_and_source_back(),
-        );
+        // The emission per patch, the analytic lights' direct light per face.
+        let mut elem_source = self
+            .prepared
+            .element_source_sides(&self.patches.emission, &self.patches.emission_back());
+        let scale = self.patches.emission_scale;
+        for (e, l) in elem_source.iter_mut().zip(&source) {
+            for c in 0..3 {
+                e[c] += l[c] / scale;
+            }
+        }
         // Nothing changed since a converged solve: its solution stands.
         if let (Some(w), Some(solution)) = (&warm, last) {
             if w.source() == elem_source.as_slice() {
