@@ -97,22 +97,37 @@ pub fn direct_source(patches: &Patches, lights: &[Light]) -> Vec<[f64; 3]> {
 /// [`direct_source`] of the patches' front faces, or of their back faces when `back` (then
 /// one-sided patches get 0: their backs absorb).
 pub fn direct_source_faces(patches: &Patches, lights: &[Light], back: bool) -> Vec<[f64; 3]> {
-    let mut total = vec![[0.0; 3]; patches.len()];
+    sum_over_lights(patches, lights, patches.len(), |rays, light, k| {
+        light_source_faces(patches, rays, light, k, back)
+    })
+}
+
+/// The sum over `lights` of `per_light(rays, light, index)` (`len` values each; all zero
+/// without lights), with one ray scene of the active patches for all of them.
+fn sum_over_lights(
+    patches: &Patches,
+    lights: &[Light],
+    len: usize,
+    per_light: impl Fn(&RayScene, &Light, usize) -> Vec<[f64; 3]>,
+) -> Vec<[f64; 3]> {
+    let mut total = vec![[0.0; 3]; len];
     if lights.is_empty() {
         return total;
     }
     let rays = RayScene::new(&patches.corners, &patches.active);
     for (k, light) in lights.iter().enumerate() {
-        for (sum, d) in total
-            .iter_mut()
-            .zip(light_source_faces(patches, &rays, light, k, back))
-        {
-            for c in 0..3 {
-                sum[c] += d[c];
-            }
-        }
+        add_into(&mut total, per_light(&rays, light, k));
     }
     total
+}
+
+/// Adds `values` to `sums`, channel by channel (as many as both have).
+pub fn add_into(sums: &mut [[f64; 3]], values: impl IntoIterator<Item = [f64; 3]>) {
+    for (sum, v) in sums.iter_mut().zip(values) {
+        for c in 0..3 {
+            sum[c] += v[c];
+        }
+    }
 }
 
 /// The reflected direct radiance of every patch from one light (unit frame, as
@@ -194,22 +209,9 @@ pub fn faces_source(
     lights: &[Light],
     faces: &[(crate::geometry::Tri, DVec3, u32)],
 ) -> Vec<[f64; 3]> {
-    let mut total = vec![[0.0; 3]; faces.len()];
-    if lights.is_empty() {
-        return total;
-    }
-    let rays = RayScene::new(&patches.corners, &patches.active);
-    for (k, light) in lights.iter().enumerate() {
-        for (sum, d) in total
-            .iter_mut()
-            .zip(light_faces_source(patches, &rays, light, k, faces))
-        {
-            for c in 0..3 {
-                sum[c] += d[c];
-            }
-        }
-    }
-    total
+    sum_over_lights(patches, lights, faces.len(), |rays, light, k| {
+        light_faces_source(patches, rays, light, k, faces)
+    })
 }
 
 /// [`faces_source`] of one light, `index` its place among the scene's lights (which picks its

@@ -223,15 +223,15 @@ impl Patches {
     /// [`Patches::emission_and_source`] of the back faces: a two-sided patch emits from both
     /// faces and its back has its own direct light (`source_back`); one-sided patches get 0.
     pub fn emission_and_source_back(&self) -> Vec<[f64; 3]> {
-        (0..self.len())
-            .map(|p| {
-                if !self.is_two_sided(p) {
-                    return [0.0; 3];
+        let mut e = self.emission_back();
+        for (p, e) in e.iter_mut().enumerate() {
+            if let (true, Some(s)) = (self.is_two_sided(p), self.source_back.get(p)) {
+                for c in 0..3 {
+                    e[c] += s[c];
                 }
-                let s = self.source_back.get(p).copied().unwrap_or([0.0; 3]);
-                [0, 1, 2].map(|c| self.emission[p][c] + s[c])
-            })
-            .collect()
+            }
+        }
+        e
     }
 
     /// Number of active (non-degenerate) patches.

@@ -140,14 +140,7 @@ pub fn solve_hierarchical_direct(
     } else {
         // The analytic lights' direct light per face, not the patch's mean: an element near a
         // point light gets its own.
-        for (d, l) in source
-            .iter_mut()
-            .zip(prepared.light_source_of_faces(patches))
-        {
-            for c in 0..3 {
-                d[c] += l[c];
-            }
-        }
+        crate::mesh::lights::add_into(&mut source, prepared.light_source_of_faces(patches));
     }
     drop(direct);
     prepared.timings.direct = t_direct.elapsed().as_secs_f64();

@@ -370,11 +370,7 @@ impl Prepared {
             )
         } else {
             let mut source = self.element_source_sides(&patches.emission, &patches.emission_back());
-            for (s, l) in source.iter_mut().zip(self.light_source_of_faces(patches)) {
-                for c in 0..3 {
-                    s[c] += l[c];
-                }
-            }
+            crate::mesh::lights::add_into(&mut source, self.light_source_of_faces(patches));
             source
         };
         self.solve_with_source(patches, &source, None, progress)

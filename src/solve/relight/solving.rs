@@ -125,11 +125,10 @@ impl Relighter {
             .prepared
             .element_source_sides(&self.patches.emission, &self.patches.emission_back());
         let scale = self.patches.emission_scale;
-        for (e, l) in elem_source.iter_mut().zip(&source) {
-            for c in 0..3 {
-                e[c] += l[c] / scale;
-            }
-        }
+        crate::mesh::lights::add_into(
+            &mut elem_source,
+            source.iter().map(|l| l.map(|x| x / scale)),
+        );
         // Nothing changed since a converged solve: its solution stands.
         if let (Some(w), Some(solution)) = (&warm, last) {
             if w.source() == elem_source.as_slice() {
