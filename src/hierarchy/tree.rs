@@ -594,8 +594,11 @@ impl ClusterTree {
         if points.is_empty() {
             return 0;
         }
+        // A leaf is one triangle: its plane is always set.
         let near = |n: &Node| {
-            let (normal, d) = n.plane.unwrap_or((n.cone_axis, n.cone_axis.dot(n.center)));
+            let Some((normal, d)) = n.plane else {
+                return false;
+            };
             points.iter().any(|&x| {
                 let height = normal.dot(x) - d;
                 (height > 0.0 || n.two_sided) && n.radius > ratio * (x - n.center).length()
@@ -607,7 +610,7 @@ impl ClusterTree {
         let mut splits = 0;
         while let Some(i) = todo.pop() {
             let n = &self.nodes[i as usize];
-            if n.patch == NONE || n.split_depth >= max_depth || n.radius <= min_radius || !near(n) {
+            if n.split_depth >= max_depth || n.radius <= min_radius || !near(n) {
                 continue;
             }
             let first = self.split_leaf(i);

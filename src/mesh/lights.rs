@@ -87,7 +87,7 @@ const SEED: u64 = 0x5eed_119a_7000_0001;
 /// patch from `lights` (which must be in the unit frame, normalized as [`Light::to_unit`]
 /// makes them), with shadow rays against the active patches. Inactive patches get 0.
 ///
-/// The sum of [`light_source`] over the lights, each light `k` with its own random streams:
+/// The sum of [`light_source_faces`] over the lights, each light `k` with its own random streams:
 /// so one light's share can be recomputed alone when it moves (relighting), and is the same
 /// as in the sum.
 pub fn direct_source(patches: &Patches, lights: &[Light]) -> Vec<[f64; 3]> {
@@ -130,7 +130,9 @@ pub fn add_into(sums: &mut [[f64; 3]], values: impl IntoIterator<Item = [f64; 3]
     }
 }
 
-/// The reflected direct radiance of every patch from one light (unit frame, as
+/// The reflected direct radiance of every patch's front face, or of its back face when `back`
+/// (one-sided patches then get 0; a back face is its patch with the corners reversed and the
+/// normal negated, with its own random streams), from one light (unit frame, as
 /// [`direct_source`]), `index` its place among the scene's lights (which picks its random
 /// streams), with shadow rays against `rays` (the active patches: `RayScene::new(&patches.corners,
 /// &patches.active)`). Inactive patches get 0.
@@ -140,18 +142,6 @@ pub fn add_into(sums: &mut [[f64; 3]], values: impl IntoIterator<Item = [f64; 3]
 /// [`EDGE_POINTS`] points instead. The sky: cosine-weighted rays from stratified points
 /// ([`SKY_RAY_BUDGET`]), each that escapes the scene carries the sky's radiance. Deterministic
 /// (each patch and light its own random stream). Linear in the light's colour.
-pub fn light_source(
-    patches: &Patches,
-    rays: &RayScene,
-    light: &Light,
-    index: usize,
-) -> Vec<[f64; 3]> {
-    light_source_faces(patches, rays, light, index, false)
-}
-
-/// [`light_source`] of the front faces, or of the back faces when `back` (one-sided patches
-/// then get 0). A back face is its patch with the corners reversed and the normal negated,
-/// with its own random streams.
 pub fn light_source_faces(
     patches: &Patches,
     rays: &RayScene,

@@ -220,20 +220,6 @@ impl Patches {
             .collect()
     }
 
-    /// [`Patches::emission_and_source`] of the back faces: a two-sided patch emits from both
-    /// faces and its back has its own direct light (`source_back`); one-sided patches get 0.
-    pub fn emission_and_source_back(&self) -> Vec<[f64; 3]> {
-        let mut e = self.emission_back();
-        for (p, e) in e.iter_mut().enumerate() {
-            if let (true, Some(s)) = (self.is_two_sided(p), self.source_back.get(p)) {
-                for c in 0..3 {
-                    e[c] += s[c];
-                }
-            }
-        }
-        e
-    }
-
     /// Number of active (non-degenerate) patches.
     pub fn active_count(&self) -> usize {
         self.active.iter().filter(|&&a| a).count()

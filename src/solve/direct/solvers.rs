@@ -133,15 +133,9 @@ pub fn solve_hierarchical_direct(
     }
     prepared.note_memory(bytes, None);
     let mut source = direct.reflected(&receivers, progress);
-    if patches.lights.is_empty() {
-        let (fronts, backs) = source.split_at_mut(n);
-        add_light_source(&patches.source, &receivers[..n], fronts);
-        add_light_source(&patches.source_back, &receivers[n..], backs);
-    } else {
-        // The analytic lights' direct light per face, not the patch's mean: an element near a
-        // point light gets its own.
-        crate::mesh::lights::add_into(&mut source, prepared.light_source_of_faces(patches));
-    }
+    // The analytic lights' direct light per face, not the patch's mean: an element near a
+    // point light gets its own.
+    crate::mesh::lights::add_into(&mut source, prepared.light_source_of_faces(patches));
     drop(direct);
     prepared.timings.direct = t_direct.elapsed().as_secs_f64();
     let (reflected, state) = prepared.solve_with_source(patches, &source, None, progress);

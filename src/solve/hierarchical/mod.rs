@@ -363,24 +363,26 @@ impl Prepared {
     /// Solves with the patches' own emission and the direct light of their analytic lights
     /// (per face, [`Prepared::light_source_of_faces`]).
     pub fn solve(&mut self, patches: &Patches, progress: &Progress) -> (Solution, ElementState) {
-        let source = if patches.lights.is_empty() {
-            self.element_source_sides(
-                &patches.emission_and_source(),
-                &patches.emission_and_source_back(),
-            )
-        } else {
-            let mut source = self.element_source_sides(&patches.emission, &patches.emission_back());
-            crate::mesh::lights::add_into(&mut source, self.light_source_of_faces(patches));
-            source
-        };
+        let mut source = self.element_source_sides(&patches.emission, &patches.emission_back());
+        crate::mesh::lights::add_into(&mut source, self.light_source_of_faces(patches));
         self.solve_with_source(patches, &source, None, progress)
     }
 
-    /// The reflected direct light of `patches.lights` (normalized units) on every face
-    /// ([`Prepared::faces`]), each piece of a patch with its own (`mesh::lights::faces_source`):
-    /// near a point light the pieces differ, where [`Patches::source`] holds only the patch's
-    /// mean. All zero without lights.
+    /// The reflected direct light (normalized units) on every face ([`Prepared::faces`]): of
+    /// `patches.lights`, each piece of a patch with its own (`mesh::lights::faces_source`; near
+    /// a point light the pieces differ, where [`Patches::source`] holds only the patch's mean);
+    /// without lights, each face's patch's [`Patches::source`] (or `source_back`; 0 where they
+    /// are empty).
     pub fn light_source_of_faces(&self, patches: &Patches) -> Vec<[f64; 3]> {
+        if patches.lights.is_empty() {
+            let of = |per_patch: &[[f64; 3]], p: u32| {
+                per_patch.get(p as usize).copied().unwrap_or([0.0; 3])
+            };
+            let fronts = self.elem_patch.iter().map(|&p| of(&patches.source, p));
+            let backs = (self.back_faces.iter())
+                .map(|&e| of(&patches.source_back, self.elem_patch[e as usize]));
+            return fronts.chain(backs).collect();
+        }
         let faces: Vec<_> = self
             .faces()
             .map(|f| (f.corners, f.normal, f.patch))

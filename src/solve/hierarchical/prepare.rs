@@ -103,24 +103,22 @@ impl Prepared {
         } = model::Backs::of(patches, options);
         tree.mark_back_blocking(&back_blocking);
         tree.mark_two_sided(&two_sided);
-        {
-            // Every face gets its own direct light from point and spot lights
-            // (`Prepared::light_source_of_faces`): elements near them are made small enough
-            // for it to vary between them.
-            let points: Vec<_> = patches.lights.iter().filter_map(|l| l.position()).collect();
-            let params = link_params(options);
-            tree.split_toward_points(
-                &points,
-                LIGHT_SPLIT_RATIO,
-                params.max_split_depth,
-                params.min_radius,
-            );
-        }
+        // Every face gets its own direct light from point and spot lights
+        // (`Prepared::light_source_of_faces`): elements near them are made small enough for it
+        // to vary between them.
+        let params = link_params(options);
+        let points: Vec<_> = patches.lights.iter().filter_map(|l| l.position()).collect();
+        tree.split_toward_points(
+            &points,
+            LIGHT_SPLIT_RATIO,
+            params.max_split_depth,
+            params.min_radius,
+        );
         let t1 = Instant::now();
         let links = links::refine(
             &mut tree,
             &bins,
-            &link_params(options),
+            &params,
             &options.coupling(),
             record_culled,
             link_budget,
