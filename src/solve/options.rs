@@ -56,8 +56,9 @@ pub struct SolverOptions {
     /// the indirect bounces only (see [`crate::solve::direct`]). On in the `default` and `accurate`
     /// presets (it lowered the error on every scene measured: room 2.53% -> 2.14%, Cornell box
     /// 2.19% -> 1.17%, bear in a room 1.57% -> 0.91%), off in `fast`. Skipped, with a warning,
-    /// when the scene would cost more than [`crate::solve::direct::DIRECT_LIGHT_BUDGET`] or
-    /// [`crate::solve::direct::MAX_SHADOW_RAYS`].
+    /// when receivers x emitter groups would be more than
+    /// [`crate::solve::direct::DIRECT_LIGHT_BUDGET`] (a scene whose every triangle is a separate
+    /// light).
     pub direct_light: bool,
     /// Memory the hierarchical solver may spend caching the geometric factor of every (receiving
     /// element, cluster link) pair, MB. The cache makes each sweep a stream of multiply-adds

@@ -107,9 +107,8 @@ pub fn direct_light_warning(stats: &SolveStats, options: &SolverOptions) -> Opti
         .is_some_and(|m| m.coarsened.iter().any(|c| c == direct::DIRECT_LIGHT_OFF));
     (options.direct_light && stats.direct_light_skipped && !for_memory).then(|| {
         warn(format!(
-            "exact direct light skipped: receivers x emitter groups is over {:.0e} or the shadow rays over {:.0e}; antiradiance carried every bounce (SolverOptions::direct_light = false silences this)",
+            "exact direct light skipped: receivers x emitter groups is over {:.0e}; antiradiance carried every bounce (SolverOptions::direct_light = false silences this)",
             direct::DIRECT_LIGHT_BUDGET as f64,
-            direct::MAX_SHADOW_RAYS as f64
         )
     )})
 }

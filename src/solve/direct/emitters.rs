@@ -84,10 +84,9 @@ pub(super) struct GroupLight {
 pub(super) struct EmitterGroup {
     /// Indices into [`Emitters`].
     pub(super) members: Vec<u32>,
-    /// Directed boundary edges (start, end), in the members' counter-clockwise order.
+    /// Directed boundary edges (start, end), in the members' counter-clockwise order, collinear
+    /// runs merged ([`merge_collinear`]).
     pub(super) boundary: Vec<(DVec3, DVec3)>,
-    /// The members' corners without repeats (for the receiver-plane test).
-    pub(super) vertices: Vec<DVec3>,
     /// Area-weighted mean unit normal and centroid.
     pub(super) normal: DVec3,
     pub(super) centroid: DVec3,
@@ -101,13 +100,15 @@ pub(super) struct EmitterGroup {
     /// Largest bounding-sphere radius of a member (about its centroid, as
     /// [`separation`] measures it).
     pub(super) member_radius: f64,
-    /// For each member (in `members` order) and each of its edges (corner i to i + 1), the
-    /// member across that edge (its position in `members`), or [`NO_NEIGHBOUR`].
-    pub(super) neighbours: Vec<[u32; 3]>,
     /// Every directed edge belongs to one member at most, so any subset of the members is
     /// bounded by the edges it does not share with itself (what a group cut by a receiver's
     /// plane needs).
     pub(super) manifold: bool,
+    /// The members lie in one plane (normals and vertices within rounding of the mean plane's):
+    /// the plane of a receiver cuts the group along one line.
+    pub(super) planar: bool,
+    /// The members' bounding-sphere tree, each node with its rim (see [`MemberTree`]).
+    pub(super) tree: MemberTree,
     /// The members' common emission (normalized units).
     pub(super) emission: [f64; 3],
     /// Total area of the members.
@@ -124,7 +125,11 @@ impl EmitterGroup {
     }
 }
 
-/// No member across this edge (see [`EmitterGroup::neighbours`]).
+/// Largest normal spread, and thickness relative to the radius, of a planar group (see
+/// [`EmitterGroup::planar`]): rounding only.
+const PLANAR: f64 = 1e-9;
+
+/// No member across this edge (see [`edge_neighbours`]).
 pub(super) const NO_NEIGHBOUR: u32 = u32::MAX;
 
 /// A point's bits as a hash key (with -0.0 folded into 0.0, so equal points give equal keys).
@@ -215,7 +220,7 @@ fn members_by_root(parent: &mut [u32]) -> Vec<Vec<u32>> {
 }
 
 /// The group of `members` (indices into `emitters`, in emitter order): its boundary, plane,
-/// bounds and edge neighbours.
+/// bounds and member tree.
 fn build_group(emitters: &Emitters, members: Vec<u32>) -> EmitterGroup {
     let Outline {
         boundary,
@@ -245,16 +250,19 @@ fn build_group(emitters: &Emitters, members: Vec<u32>) -> EmitterGroup {
         .map(|&m| emitters.geom[m as usize].radius)
         .fold(0.0, f64::max);
     let (neighbours, manifold) = edge_neighbours(emitters, &members);
+    let tree = MemberTree::new(emitters, &members, &neighbours);
+    let boundary = merge_collinear(boundary);
+    let planar = normal_spread <= PLANAR && thickness <= PLANAR * radius;
     EmitterGroup {
+        planar,
+        tree,
         emission: emitters.emission[members[0] as usize],
         member_radius,
-        neighbours,
         manifold,
         area,
         member_cdf,
         members,
         boundary,
-        vertices,
         normal,
         centroid,
         normal_spread,
@@ -328,8 +336,9 @@ impl Outline {
     }
 }
 
-/// Who is across each edge of each of `members` (see [`EmitterGroup::neighbours`]): the member
-/// owning its reverse; and whether every directed edge has one owner at most
+/// Who is across each edge of each of `members`: for each member (in `members` order) and each
+/// of its edges (corner i to i + 1), the member owning its reverse (its position in `members`),
+/// or [`NO_NEIGHBOUR`]; and whether every directed edge has one owner at most
 /// ([`EmitterGroup::manifold`]).
 fn edge_neighbours(emitters: &Emitters, members: &[u32]) -> (Vec<[u32; 3]>, bool) {
     use std::collections::HashMap;

@@ -41,9 +41,11 @@
 //! depend on thread scheduling. Shadow rays use the watertight test of [`crate::geometry::raytrace`].
 
 mod emitters;
+mod member_tree;
 mod solvers;
 
 use emitters::*;
+use member_tree::*;
 #[cfg(test)]
 use solvers::patch_receivers;
 pub use solvers::{solve_dense_direct, solve_hierarchical_direct, DIRECT_LIGHT_OFF};
@@ -74,10 +76,10 @@ pub const SHADOW_RAY_BUDGET: usize = 1_000_000;
 /// a separate emitter would otherwise pay receivers x emitters form factors.
 pub const DIRECT_LIGHT_BUDGET: u64 = 200_000_000;
 
-/// Most shadow rays a direct-light pass may need at [`MIN_SHADOW_SAMPLES`] per receiver; above
-/// it (more than half a million receivers) the solvers skip exact direct light (and say so): on
-/// a 1M-triangle box the pass (at 64 rays per receiver) took longer than the whole
-/// antiradiance solve.
+/// Most shadow rays the per-group floor of [`shadow_samples_for`] may raise a pass to (a scene
+/// lit by several groups gets up to [`MIN_SHADOW_SAMPLES`] per group and receiver while the
+/// pass stays under this). It does not limit the receivers: every receiver gets at least
+/// [`MIN_SHADOW_SAMPLES`], so the 1M-triangle Cornell box's pass costs 16M rays.
 pub const MAX_SHADOW_RAYS: u64 = 8_000_000;
 
 /// Fewest shadow samples per receiving element (a square, for stratification).
@@ -259,13 +261,13 @@ impl<'a> DirectLight<'a> {
         // 1. Every receiver's unoccluded light, and the groups it comes from.
         let unoccluded: Vec<(Vec<GroupLight>, [f64; 3])> = receivers
             .par_iter()
-            .map_init(Vec::new, |whole, r| {
+            .map_init(Vec::new, |parts, r| {
                 let rho = self.patches.albedo[r.patch as usize];
                 if self.emitters.len() == 0 || !(r.area > 0.0) || rho.iter().all(|&x| x <= 0.0) {
                     return (Vec::new(), [0.0; 3]);
                 }
                 let mut lights = Vec::new();
-                let u = self.unoccluded(r, &mut lights, whole);
+                let u = self.unoccluded(r, &mut lights, parts);
                 (lights, u)
             })
             .collect();
@@ -323,11 +325,9 @@ impl<'a> DirectLight<'a> {
     }
 
     /// True when `receivers` receivers would cost more than [`DIRECT_LIGHT_BUDGET`] unoccluded
-    /// form-factor terms against the emitter groups, or more than [`MAX_SHADOW_RAYS`] shadow
-    /// rays at the fewest samples per receiver.
+    /// form-factor terms against the emitter groups (the receivers' count alone never is).
     pub fn over_budget(&self, receivers: usize) -> bool {
         receivers as u64 * self.group_count() as u64 > DIRECT_LIGHT_BUDGET
-            || receivers as u64 * MIN_SHADOW_SAMPLES as u64 > MAX_SHADOW_RAYS
     }
 
     /// Number of emitter groups (see `EmitterGroup`); at most the number of emitters.
@@ -347,7 +347,7 @@ impl<'a> DirectLight<'a> {
         &self,
         r: &Element,
         lights: &mut Vec<GroupLight>,
-        whole: &mut Vec<bool>,
+        parts: &mut Vec<Part>,
     ) -> [f64; 3] {
         let receiver = PatchGeom::new(r.corners, r.normal);
         let mut sum = [0.0f64; 3];
@@ -359,7 +359,10 @@ impl<'a> DirectLight<'a> {
             let f = if group.members.len() > 1 && self.in_front_of_receiver(r, &receiver, group) {
                 self.group_form_factor(r, &receiver, group, None)
             } else if group.members.len() > 1 && group.manifold {
-                self.cut_group_form_factor(r, &receiver, group, whole)
+                (group.planar)
+                    .then(|| self.planar_cut_form_factor(r, &receiver, group))
+                    .flatten()
+                    .unwrap_or_else(|| self.cut_group_form_factor(r, &receiver, group, parts))
             } else {
                 group
                     .members
@@ -419,49 +422,85 @@ impl<'a> DirectLight<'a> {
     ) -> bool {
         let tol = plane_tol(receiver.size.max(2.0 * group.radius));
         let height = |p: DVec3| r.normal.dot(p - r.corners[0]);
-        height(group.center) >= group.radius || group.vertices.iter().all(|&v| height(v) >= -tol)
+        if height(group.center) >= group.radius {
+            return true;
+        }
+        // Every corner of every member at height -tol or more, node by node.
+        let tree = &group.tree;
+        let mut stack = vec![0u32];
+        while let Some(n) = stack.pop() {
+            let node = &tree.nodes[n as usize];
+            let h = height(node.center);
+            if h - node.radius >= -tol {
+                continue;
+            }
+            if h + node.radius < -tol {
+                return false;
+            }
+            if node.is_leaf() {
+                let corners = tree
+                    .members(node)
+                    .iter()
+                    .flat_map(|&i| self.emitters.geom[group.members[i as usize] as usize].corners);
+                if corners.into_iter().any(|c| height(c) < -tol) {
+                    return false;
+                }
+            } else {
+                stack.extend(node.children);
+            }
+        }
+        true
     }
 
     /// Mean form factor of a group seen from the receiver, whose plane has the whole group in
-    /// front of it (or, with `subset`, of the members marked in it, which must be wholly in
-    /// front of it, the group manifold): the same quadrature as member by member (each
-    /// member's receiver points from its own separation), computed as the contour sum at the
-    /// receiver's centroid (every member at one point) plus, for the few near members that
-    /// need more points, their own quadrature in place of their centroid value. Falls back to
-    /// member by member when the centroid is not clearly in front of every member.
+    /// front of it (or, with `parts`, of those parts, which must be wholly in front of it, the
+    /// group manifold): the same quadrature as member by member (each member's receiver points
+    /// from its own separation), computed as the contour sum at the receiver's centroid (every
+    /// member at one point) plus, for the few near members that need more points, their own
+    /// quadrature in place of their centroid value. Falls back to member by member when the
+    /// centroid is not clearly in front of every member.
     fn group_form_factor(
         &self,
         r: &Element,
         receiver: &PatchGeom,
         group: &EmitterGroup,
-        subset: Option<&[bool]>,
+        parts: Option<&[Part]>,
     ) -> f64 {
-        let chosen = |i: usize| subset.is_none_or(|marked| marked[i]);
+        let tree = &group.tree;
+        let whole = [Part::Node(0)];
+        let chosen = parts.unwrap_or(&whole);
         let x = receiver.centroid;
         let height = group.normal.dot(x - group.centroid);
         let margin = group.normal_spread * ((x - group.center).length() + group.radius)
             + group.thickness
             + PLANE_EPS * group.radius;
         if height <= margin {
-            return (group.members.iter().enumerate())
-                .filter(|&(i, _)| chosen(i))
-                .map(|(_, &k)| self.emitter_form_factor(r, receiver, k as usize))
-                .sum();
+            let mut f = 0.0;
+            for_each_member(tree, chosen, |i| {
+                f += self.emitter_form_factor(r, receiver, group.members[i as usize] as usize);
+            });
+            return f;
         }
-        let mut f = match subset {
+        let mut f = match parts {
             None => contour_form_factor(x, r.normal, &group.boundary),
-            Some(marked) => {
-                // The subset's rim: its members' edges whose neighbour is not in it (shared
-                // edges cancel, as in the whole group's boundary).
+            Some(parts) => {
+                // The parts' rims: shared edges cancel, as in the whole group's boundary.
                 let mut sum = 0.0;
-                for (i, &k) in group.members.iter().enumerate() {
-                    if !marked[i] {
-                        continue;
-                    }
-                    let c = self.emitters.geom[k as usize].corners;
-                    for (j, &across) in group.neighbours[i].iter().enumerate() {
-                        if across == NO_NEIGHBOUR || !marked[across as usize] {
-                            sum += geometry::lambert_edge(c[j] - x, c[(j + 1) % 3] - x, r.normal);
+                let mut add = |a: DVec3, b: DVec3| {
+                    sum += geometry::lambert_edge(a - x, b - x, r.normal);
+                };
+                for &part in parts {
+                    match part {
+                        Part::Node(n) => {
+                            for &(a, b) in tree.rim(&tree.nodes[n as usize]) {
+                                add(a, b);
+                            }
+                        }
+                        Part::Member(i) => {
+                            let c = self.emitters.geom[group.members[i as usize] as usize].corners;
+                            for j in 0..3 {
+                                add(c[j], c[(j + 1) % 3]);
+                            }
                         }
                     }
                 }
@@ -474,14 +513,16 @@ impl<'a> DirectLight<'a> {
         if nearest_gap > FAR_RATIO * receiver.size {
             return f.max(0.0);
         }
-        for (i, &k) in group.members.iter().enumerate() {
-            if !chosen(i) {
-                continue;
-            }
-            let s = &self.emitters.geom[k as usize];
+        // The same bound node by node: only nodes near the receiver are visited.
+        let far = |node: &MemberNode| {
+            (x - node.center).length() - node.radius - node.member_radius
+                > FAR_RATIO * receiver.size
+        };
+        let mut near_member = |i: u32| {
+            let s = &self.emitters.geom[group.members[i as usize] as usize];
             let q = receiver_points(separation(receiver, s));
             if q == 1 {
-                continue;
+                return;
             }
             let mut near = 0.0;
             for piece in geometry::subdivide(&r.corners, q) {
@@ -491,45 +532,187 @@ impl<'a> DirectLight<'a> {
                 }
             }
             f += near / (q * q) as f64 - geometry::point_form_factor(x, r.normal, &s.corners);
+        };
+        let mut stack = Vec::new();
+        for &part in chosen {
+            match part {
+                Part::Member(i) => near_member(i),
+                Part::Node(n) => stack.push(n),
+            }
+            while let Some(n) = stack.pop() {
+                let node = &tree.nodes[n as usize];
+                if far(node) {
+                    continue;
+                }
+                if node.is_leaf() {
+                    tree.members(node).iter().for_each(|&i| near_member(i));
+                } else {
+                    stack.extend(node.children);
+                }
+            }
         }
         f.max(0.0)
     }
 
     /// Mean form factor of a (manifold) group whose members the receiver's plane cuts: the
-    /// members wholly in front of it together ([`Self::group_form_factor`] over that subset),
-    /// those it cuts one by one (clipped), those behind it not at all. Exactly the members'
-    /// sum, at the cost of the subset's rim instead of every member's form factor: a ceiling
-    /// light cut by the plane of a cupboard's side cost 4M member form factors on the room.
-    /// `whole` is scratch.
+    /// parts wholly in front of it together ([`Self::group_form_factor`] over them), the
+    /// members it cuts one by one (clipped), those behind it not at all. Exactly the members'
+    /// sum, at the cost of the rims of the parts in front and the members along the cut: a
+    /// ceiling light cut by the plane of a cupboard's side cost 4M member form factors on the
+    /// room, and one of 11,250 triangles cut by the planes of the boxes' sides most of the
+    /// direct light of the 258k-triangle Cornell box. `parts` is scratch.
     fn cut_group_form_factor(
         &self,
         r: &Element,
         receiver: &PatchGeom,
         group: &EmitterGroup,
-        whole: &mut Vec<bool>,
+        parts: &mut Vec<Part>,
     ) -> f64 {
-        whole.clear();
+        parts.clear();
+        let tree = &group.tree;
+        let height = |p: DVec3| r.normal.dot(p - r.corners[0]);
         let mut f = 0.0;
-        let mut any_whole = false;
-        for &k in &group.members {
-            let s = &self.emitters.geom[k as usize];
-            // The sides as `emitter_form_factor`'s clipping sees them.
-            let tol = plane_tol(receiver.size.max(s.size));
-            let height = geometry::plane_heights(&s.corners, r.corners[0], r.normal, tol);
-            let in_front = height.iter().all(|&h| h >= 0.0)
-                && height.iter().any(|&h| h > 0.0)
-                && self.emitters.patch[k as usize] != r.patch;
-            whole.push(in_front);
-            if in_front {
-                any_whole = true;
-            } else if height.iter().any(|&h| h > 0.0) {
-                f += self.emitter_form_factor(r, receiver, k as usize);
+        let mut stack = vec![0u32];
+        while let Some(n) = stack.pop() {
+            let node = &tree.nodes[n as usize];
+            // At least every member's own tolerance below.
+            let tol = plane_tol(receiver.size.max(node.size));
+            let h = height(node.center);
+            if h - node.radius > tol {
+                parts.push(Part::Node(n));
+                continue;
+            }
+            if h + node.radius < -tol {
+                continue;
+            }
+            if !node.is_leaf() {
+                stack.extend(node.children);
+                continue;
+            }
+            for &i in tree.members(node) {
+                let k = group.members[i as usize] as usize;
+                let s = &self.emitters.geom[k];
+                // The sides as `emitter_form_factor`'s clipping sees them.
+                let tol = plane_tol(receiver.size.max(s.size));
+                let height = geometry::plane_heights(&s.corners, r.corners[0], r.normal, tol);
+                let in_front = height.iter().all(|&h| h >= 0.0)
+                    && height.iter().any(|&h| h > 0.0)
+                    && self.emitters.patch[k] != r.patch;
+                if in_front {
+                    parts.push(Part::Member(i));
+                } else if height.iter().any(|&h| h > 0.0) {
+                    f += self.emitter_form_factor(r, receiver, k);
+                }
             }
         }
-        if any_whole {
-            f += self.group_form_factor(r, receiver, group, Some(whole));
+        if !parts.is_empty() {
+            f += self.group_form_factor(r, receiver, group, Some(parts));
         }
         f
+    }
+
+    /// Mean form factor of a planar, manifold group whose members the receiver's plane cuts, as
+    /// one contour: the group's boundary clipped to the front of the receiver's plane, closed
+    /// by the segments where that plane crosses the group (from each exit point to the next
+    /// entry point along the line), plus the near members' own quadrature in place of their
+    /// centroid value (a member the plane cuts: its clipped part's). The same sum as
+    /// [`Self::cut_group_form_factor`] (to the plane tolerance) for the cost of the boundary
+    /// and the members near the receiver: on the 1M-triangle Cornell box the boxes' sides cut
+    /// a light of 43,808 triangles. `None` when the receiver's centroid is not clearly in
+    /// front of every member, or the crossings do not pair (the caller then goes member by
+    /// member).
+    fn planar_cut_form_factor(
+        &self,
+        r: &Element,
+        receiver: &PatchGeom,
+        group: &EmitterGroup,
+    ) -> Option<f64> {
+        let x = receiver.centroid;
+        let margin = group.normal_spread * ((x - group.center).length() + group.radius)
+            + group.thickness
+            + PLANE_EPS * group.radius;
+        if group.normal.dot(x - group.centroid) <= margin {
+            return None;
+        }
+        let tree = &group.tree;
+        // Every member's own clipping tolerance is at most this one.
+        let tol = plane_tol(receiver.size.max(tree.nodes[0].size));
+        let height = |p: DVec3| {
+            let h = r.normal.dot(p - r.corners[0]);
+            if h.abs() <= tol {
+                0.0
+            } else {
+                h
+            }
+        };
+        let edge = |a: DVec3, b: DVec3| geometry::lambert_edge(a - x, b - x, r.normal);
+        // 1. The boundary in front; where it leaves and re-enters the front half-space.
+        let along = group.normal.cross(r.normal);
+        let mut sum = 0.0;
+        let mut crossings: Vec<(f64, DVec3, bool)> = Vec::new();
+        for &(a, b) in &group.boundary {
+            let (ha, hb) = (height(a), height(b));
+            match (ha > 0.0, hb > 0.0) {
+                (true, true) => sum += edge(a, b),
+                (false, false) => {}
+                (front_a, _) => {
+                    let p = a + (b - a) * (ha / (ha - hb));
+                    if front_a {
+                        sum += edge(a, p);
+                    } else {
+                        sum += edge(p, b);
+                    }
+                    crossings.push((along.dot(p), p, front_a));
+                }
+            }
+        }
+        // 2. The cut: along the line, the crossings bound the group's chords in pairs, each an
+        //    entry point then an exit point (the members counter-clockwise about the group's
+        //    normal put the group's inside on the decreasing side of an exit); each chord
+        //    closes the contour from its exit back to its entry.
+        if crossings.len() % 2 != 0 {
+            return None;
+        }
+        crossings.sort_by(|c, d| c.0.total_cmp(&d.0));
+        for pair in crossings.chunks_exact(2) {
+            let [(_, entry, false), (_, exit, true)] = [pair[0], pair[1]] else {
+                return None;
+            };
+            sum += edge(exit, entry);
+        }
+        let mut f = geometry::lambert_form_factor(sum);
+        // 3. Near members: their own receiver points in place of the centroid.
+        let nearest_gap = (x - group.center).length() - group.radius - group.member_radius;
+        if nearest_gap > FAR_RATIO * receiver.size {
+            return Some(f.max(0.0));
+        }
+        let mut stack = vec![0u32];
+        while let Some(n) = stack.pop() {
+            let node = &tree.nodes[n as usize];
+            let far = (x - node.center).length() - node.radius - node.member_radius
+                > FAR_RATIO * receiver.size;
+            if far || r.normal.dot(node.center - r.corners[0]) + node.radius < -tol {
+                continue;
+            }
+            if !node.is_leaf() {
+                stack.extend(node.children);
+                continue;
+            }
+            for &i in tree.members(node) {
+                let k = group.members[i as usize] as usize;
+                let s = &self.emitters.geom[k];
+                if receiver_points(separation(receiver, s)) == 1 {
+                    continue;
+                }
+                let (front, _) = geometry::clip_by_plane(&s.corners, r.corners[0], r.normal, tol);
+                let at_centroid: f64 = front
+                    .triangles()
+                    .map(|part| geometry::point_form_factor(x, r.normal, &part))
+                    .sum();
+                f += self.emitter_form_factor(r, receiver, k) - at_centroid;
+            }
+        }
+        Some(f.max(0.0))
     }
 
     /// Mean form factor of emitter `k` seen from the receiver (the part of it in front of the

@@ -4,7 +4,8 @@ mod tests {
     use crate::scene::generated;
     use crate::scene::Scene;
 
-    /// A 1 x 1 emitter (facing down, split into 4 x 4 x 2 triangles so it forms one group)
+    /// A 1 x 1 emitter (facing down, split into 16 x 16 x 2 triangles so it forms one group
+    /// whose member tree has several levels)
     /// over receivers in every relation to it: below, tilted, cutting its plane, beside it in its
     /// plane, above it (behind), touching its edge, and below it with their planes cutting it
     /// (between its triangles' corners, one of them close).
@@ -17,7 +18,7 @@ mod tests {
         let mut corners: Vec<[DVec3; 3]> = Vec::new();
         let light_scene = generated::subdivide(
             &Scene::from_triangles(&light, &[[0.0; 3]; 2], &[[1.0; 3]; 2]),
-            4,
+            16,
         );
         for t in 0..light_scene.len() {
             corners.push(light_scene.corners(t));
@@ -40,17 +41,11 @@ mod tests {
         Scene::from_triangles(&corners, &vec![[0.5; 3]; n], &emission)
     }
 
-    #[test]
-    fn groups_give_the_sum_of_their_members() {
-        let scene = grouped_scene();
-        let patches = build_patches(&scene, None);
-        let light = DirectLight::new(&patches, patches.len());
-        assert_eq!(light.group_count(), 1, "the split light is one group");
-        assert_eq!(
-            light.groups[0].boundary.len(),
-            4 * 4,
-            "the square's rim, 4 x 4 edges"
-        );
+    /// Asserts that every patch of `scene` sees each emitter group as the sum of its members.
+    fn assert_group_is_its_members_sum(scene: &Scene) -> DirectLight<'static> {
+        let patches: &'static _ = Box::leak(Box::new(build_patches(scene, None)));
+        let light = DirectLight::new(patches, patches.len());
+        assert!(light.group_count() >= 1);
         for p in 0..patches.len() {
             let r = Element {
                 corners: patches.corners[p],
@@ -68,6 +63,65 @@ mod tests {
                 "patch {p}: grouped {grouped} vs members {member_sum}"
             );
         }
+        light
+    }
+
+    #[test]
+    fn groups_give_the_sum_of_their_members() {
+        let light = assert_group_is_its_members_sum(&grouped_scene());
+        assert_eq!(light.group_count(), 1, "the split light is one group");
+        assert_eq!(
+            light.groups[0].boundary.len(),
+            4,
+            "the square's rim of 4 x 16 edges, merged into its 4 sides"
+        );
+    }
+
+    /// The subdivided Cornell box: its light of 2 x 8 x 8 triangles seen from the walls and the
+    /// boxes, whose sides' planes cut it.
+    #[test]
+    fn the_subdivided_cornell_box_light_is_the_sum_of_its_members() {
+        let light = assert_group_is_its_members_sum(&generated::subdivided_cornell_box(3000));
+        assert!(light.groups.iter().all(|g| g.planar && g.manifold));
+    }
+
+    /// A square ring light (3 x 3 with a 1 x 1 hole, facing down, 256 triangles) over receivers
+    /// whose planes cut it through the hole, beside it and across a corner: the cut crosses the
+    /// rim four times, or twice. (The unit frame's rounding may split the ring into groups; a
+    /// U-shaped one is crossed four times too.)
+    #[test]
+    fn a_ring_light_cut_through_its_hole_gives_the_sum_of_its_members() {
+        let v = DVec3::new;
+        let mut corners: Vec<[DVec3; 3]> = Vec::new();
+        let at = |i: usize, j: usize| v(i as f64 / 4.0, 1.0, j as f64 / 4.0);
+        for i in 0..12 {
+            for j in 0..12 {
+                if (4..8).contains(&i) && (4..8).contains(&j) {
+                    continue;
+                }
+                let (a, b, c, d) = (at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1));
+                corners.extend([[a, b, c], [a, c, d]]);
+            }
+        }
+        let emitters = corners.len();
+        corners.extend([
+            [v(1.5, 0.0, -1.0), v(1.5, 0.9, 4.0), v(1.5, 0.0, 4.0)], // through the hole
+            [v(1.5, 0.0, -1.0), v(1.5, 0.0, 4.0), v(1.5, 0.9, 4.0)], // the same, facing back
+            [v(1.2, 0.0, -1.0), v(1.8, 0.0, 4.0), v(1.5, 0.95, 1.5)], // tilted, through it
+            [v(0.5, 0.0, -1.0), v(0.5, 0.8, 4.0), v(0.5, 0.0, 4.0)], // beside the hole
+            [v(2.5, 0.0, 0.0), v(3.2, 0.0, 1.0), v(3.0, 0.9, 0.0)], // across a corner
+            [v(0.0, 0.0, 0.0), v(3.0, 0.0, 3.0), v(3.0, 0.0, 0.0)], // below, facing up
+        ]);
+        let n = corners.len();
+        let mut emission = vec![[0.0; 3]; n];
+        emission[..emitters].fill([1.0; 3]);
+        let scene = Scene::from_triangles(&corners, &vec![[0.5; 3]; n], &emission);
+        let light = assert_group_is_its_members_sum(&scene);
+        assert!(light.groups.iter().all(|g| g.planar && g.manifold));
+        assert!(
+            light.groups.iter().any(|g| g.boundary.len() >= 8),
+            "a group that is not convex"
+        );
     }
 }
 
@@ -137,8 +191,9 @@ mod budget_tests {
         let groups = direct.group_count() as u64;
         assert!(groups >= 1);
         assert!(!direct.over_budget(patches.len()));
-        let limit = (DIRECT_LIGHT_BUDGET / groups).min(MAX_SHADOW_RAYS / MIN_SHADOW_SAMPLES as u64)
-            as usize;
+        // The receivers' count alone never skips it (shadow rays at any scale).
+        assert!(!direct.over_budget(4_000_000 / groups as usize));
+        let limit = (DIRECT_LIGHT_BUDGET / groups) as usize;
         assert!(!direct.over_budget(limit));
         assert!(direct.over_budget(limit + 1));
     }
