@@ -512,7 +512,14 @@ pub fn subdivide(tri: &Tri, m: usize) -> impl Iterator<Item = Tri> + '_ {
     let inv = 1.0 / m as f64;
     let e1 = (tri[1] - tri[0]) * inv;
     let e2 = (tri[2] - tri[0]) * inv;
-    let at = move |i: usize, j: usize| tri[0] + e1 * i as f64 + e2 * j as f64;
+    // The corners themselves, not `tri[0] + (tri[1] - tri[0])`: a triangle kept whole (m = 1)
+    // keeps its corners' bits, so triangles that share a vertex still share it exactly.
+    let at = move |i: usize, j: usize| match (i, j) {
+        (0, 0) => tri[0],
+        (i, 0) if i == m => tri[1],
+        (0, j) if j == m => tri[2],
+        _ => tri[0] + e1 * i as f64 + e2 * j as f64,
+    };
     (0..m).flat_map(move |i| {
         (0..m - i).flat_map(move |j| {
             let up = [at(i, j), at(i + 1, j), at(i, j + 1)];
@@ -525,6 +532,25 @@ pub fn subdivide(tri: &Tri, m: usize) -> impl Iterator<Item = Tri> + '_ {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A triangle kept whole keeps its corners' bits (emitters that share a vertex are joined by
+    /// bit-identical end points; `a + (b - a)` is not `b`).
+    #[test]
+    fn subdivide_keeps_the_corners_exactly() {
+        let tri = [
+            DVec3::new(0.1, 0.7, -0.3),
+            DVec3::new(-0.006175792596686769, 0.28561305986474694, 0.3),
+            DVec3::new(0.9, -0.2, 0.123456789),
+        ];
+        let whole: Vec<Tri> = subdivide(&tri, 1).collect();
+        assert_eq!(whole, vec![tri]);
+        for m in 2..5 {
+            let pieces: Vec<Tri> = subdivide(&tri, m).collect();
+            for corner in tri {
+                assert!(pieces.iter().any(|p| p.contains(&corner)), "m = {m}");
+            }
+        }
+    }
 
     #[test]
     fn subdivide_covers_area() {
