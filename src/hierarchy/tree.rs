@@ -10,6 +10,7 @@
 use std::time::Duration;
 
 use glam::DVec3;
+use rayon::prelude::*;
 
 use crate::geometry::{self, tolerances, Tri};
 use crate::mesh::Patches;
@@ -173,6 +174,77 @@ fn split_bin(g: i64, lo: i64, span: i64) -> usize {
     ((g - lo) as i128 * SPLIT_BINS as i128 / span as i128) as usize
 }
 
+/// Ranges at least this long are split on their own thread ([`split_range`]).
+const PARALLEL_SPLIT: usize = 4096;
+
+/// How [`split_range`] split a range: a leaf (one patch), or two parts, the first `mid` long,
+/// `head` the range's first patch right after this split.
+enum Shape {
+    Leaf,
+    Split {
+        mid: usize,
+        head: u32,
+        parts: Box<[Shape; 2]>,
+    },
+}
+
+/// Splits `range` (of patches, at least one) recursively as [`ClusterTree::build_nodes`]
+/// documents, reordering it (each part after its parent's split, first part first), and
+/// returns the shape of the splits. Parts of at least [`PARALLEL_SPLIT`] patches are split in
+/// parallel; the result does not depend on it.
+fn split_range(range: &mut [u32], centroid: &[DVec3], corners: &[Tri]) -> Shape {
+    if range.len() <= 1 {
+        return Shape::Leaf;
+    }
+    let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+    for &p in range.iter() {
+        for v in corners[p as usize] {
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+    }
+    let extent = (hi - lo).length();
+    // The largest triangle (first by patch index among equals).
+    let area = |p: u32| geometry::area(&corners[p as usize]);
+    let (big, big_area) = range.iter().enumerate().fold((0, -1.0), |best, (k, &p)| {
+        let a = area(p);
+        if a > best.1 || (a == best.1 && p < range[best.0]) {
+            (k, a)
+        } else {
+            best
+        }
+    });
+    let total: f64 = range.iter().map(|&p| area(p)).sum();
+    let peel = range.len() > 2
+        && big_area >= 0.5 * total
+        && 2.0 * triangle_radius(&corners[range[big] as usize]) >= 0.5 * extent;
+    let mid = if peel {
+        range.swap(0, big);
+        1
+    } else {
+        sah_split(range, centroid, corners)
+    };
+    let head = range[0];
+    let parallel = range.len() >= PARALLEL_SPLIT;
+    let (first, second) = range.split_at_mut(mid);
+    let parts = if parallel {
+        rayon::join(
+            || split_range(first, centroid, corners),
+            || split_range(second, centroid, corners),
+        )
+    } else {
+        (
+            split_range(first, centroid, corners),
+            split_range(second, centroid, corners),
+        )
+    };
+    Shape::Split {
+        mid,
+        head,
+        parts: Box::new([parts.0, parts.1]),
+    }
+}
+
 /// Splits `range` (at least two patches) in two by the surface area heuristic over
 /// [`SPLIT_BINS`] centroid bins per axis, and returns the size of the first part (the range is
 /// reordered, first part first, each part in its former order).
@@ -298,61 +370,45 @@ impl ClusterTree {
     fn build_nodes(&mut self, patches: &Patches, mut active: Vec<u32>) {
         let corners = &patches.corners;
         let centroid: Vec<DVec3> = (0..patches.len())
+            .into_par_iter()
             .map(|p| geometry::centroid(&corners[p]))
             .collect();
-        let radius = |p: u32| triangle_radius(&corners[p as usize]);
+        let root_head = active[0];
+        // 1. The splits, independent ranges in parallel: `active` reordered, and their shape.
+        let shape = split_range(&mut active, &centroid, corners);
+        // 2. The leaves, in parallel.
+        let leaves: Vec<Node> = active
+            .par_iter()
+            .map(|&p| leaf_node(corners[p as usize], p, NONE, 0))
+            .collect();
+        // 3. The nodes, laid out top down with each node's two children side by side (their
+        //    placeholders take the corners of the parent's first patch right after its split;
+        //    `refit_all` fills in the clusters).
         self.nodes.clear();
         self.nodes
-            .push(leaf_node(corners[active[0] as usize], NONE, NONE, 0));
-        // (node, first, end) ranges of `active` still to split.
-        let mut stack = vec![(0u32, 0usize, active.len())];
-        while let Some((node, first, end)) = stack.pop() {
-            if end - first == 1 {
-                let p = active[first];
+            .push(leaf_node(corners[root_head as usize], NONE, NONE, 0));
+        // (node, first of its range, its shape)
+        let mut stack = vec![(0u32, 0usize, &shape)];
+        while let Some((node, first, shape)) = stack.pop() {
+            let Shape::Split { mid, head, parts } = shape else {
                 let parent = self.nodes[node as usize].parent;
-                self.nodes[node as usize] = leaf_node(corners[p as usize], p, parent, 0);
+                self.nodes[node as usize] = Node {
+                    parent,
+                    ..leaves[first].clone()
+                };
                 continue;
-            }
-            let range = &mut active[first..end];
-            let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
-            for &p in range.iter() {
-                for v in corners[p as usize] {
-                    lo = lo.min(v);
-                    hi = hi.max(v);
-                }
-            }
-            let extent = (hi - lo).length();
-            // The largest triangle (first by patch index among equals).
-            let area = |p: u32| geometry::area(&corners[p as usize]);
-            let (big, big_area) = range.iter().enumerate().fold((0, -1.0), |best, (k, &p)| {
-                let a = area(p);
-                if a > best.1 || (a == best.1 && p < range[best.0]) {
-                    (k, a)
-                } else {
-                    best
-                }
-            });
-            let total: f64 = range.iter().map(|&p| area(p)).sum();
-            let peel = range.len() > 2
-                && big_area >= 0.5 * total
-                && 2.0 * radius(range[big]) >= 0.5 * extent;
-            let mid = if peel {
-                range.swap(0, big);
-                1
-            } else {
-                sah_split(range, &centroid, corners)
             };
             let child = self.nodes.len() as u32;
             for _ in 0..2 {
-                let c = leaf_node(corners[active[first] as usize], NONE, node, 0);
+                let c = leaf_node(corners[*head as usize], NONE, node, 0);
                 self.nodes.push(c);
             }
             let n = &mut self.nodes[node as usize];
             n.first_child = child;
             n.child_count = 2;
             n.patch = NONE;
-            stack.push((child, first, first + mid));
-            stack.push((child + 1, first + mid, end));
+            stack.push((child, first, &parts[0]));
+            stack.push((child + 1, first + mid, &parts[1]));
         }
     }
 
