@@ -148,6 +148,8 @@ pub fn solve_hierarchical_direct(
     drop(direct);
     prepared.timings.direct = t_direct.elapsed().as_secs_f64();
     let (reflected, state) = prepared.solve_with_source(patches, &source, None, progress);
+    // The tree and links are done with: the per-patch results below need not sit on them.
+    drop((prepared, source));
     // `reflected` is R clamped and scaled; B is formed from the unclamped element values.
     let radiance = add_emission(patches, &faces, state.radiance());
     let radiance_back = if state.radiance_back().is_empty() {
