@@ -76,18 +76,25 @@ pub const SHADOW_RAY_BUDGET: usize = 1_000_000;
 /// a separate emitter would otherwise pay receivers x emitters form factors.
 pub const DIRECT_LIGHT_BUDGET: u64 = 200_000_000;
 
-/// Most shadow rays the per-group floor of [`shadow_samples_for`] may raise a pass to (a scene
-/// lit by several groups gets up to [`MIN_SHADOW_SAMPLES`] per group and receiver while the
-/// pass stays under this). It does not limit the receivers: every receiver gets at least
+/// Most shadow rays the floor [`FLOOR_SAMPLES`] may raise a pass to: above
+/// `MAX_SHADOW_RAYS / FLOOR_SAMPLES` receivers the floor falls, to [`MIN_SHADOW_SAMPLES`] at
+/// half a million. It does not limit the receivers: every receiver gets at least
 /// [`MIN_SHADOW_SAMPLES`], so the 1M-triangle Cornell box's pass costs 16M rays.
 pub const MAX_SHADOW_RAYS: u64 = 8_000_000;
 
 /// Fewest shadow samples per receiving element (a square, for stratification).
 pub const MIN_SHADOW_SAMPLES: usize = 16;
 
-/// Most emitter groups that raise the shadow samples per receiver ([`shadow_samples_for`]:
-/// [`MIN_SHADOW_SAMPLES`] per group, so 64 at most from this rule).
-pub const GROUP_SAMPLE_GROUPS: usize = 4;
+/// Shadow samples per receiving element that the budget may not go below while the pass stays
+/// within [`MAX_SHADOW_RAYS`] (a square). The pilot ([`PILOT_SAMPLES`]) stops wholly lit and
+/// wholly shadowed receivers first, so the floor costs rays in penumbrae only. Each emitter
+/// group takes the visible fraction of its own samples (a ratio estimator whose bias and noise
+/// fall as 1 / samples per group), and a receiver in a penumbra is noisy at 16: against
+/// path-traced references, the 66k-triangle Cornell box 2.42% -> 2.31% rms (the references'
+/// noise removed) for 0.34 s more direct light; the generated classroom (16 groups) 2.40% ->
+/// 2.30% against 16,384 spp, b90_office 4.28% (bias +1.42%) -> 3.83% (+0.51%) against 8,192
+/// spp.
+pub const FLOOR_SAMPLES: usize = 64;
 
 /// Most shadow samples per receiving element (a square, for stratification).
 pub const MAX_SHADOW_SAMPLES: usize = 1024;
@@ -172,27 +179,13 @@ fn receiver_points(ratio: f64) -> usize {
     }
 }
 
-/// Mean shadow samples per receiver for `receivers` receivers lit by one emitter group: the
-/// ray budget spread evenly, clamped, rounded down to a square k x k.
+/// Mean shadow samples per receiver for `receivers` receivers: the ray budget
+/// [`SHADOW_RAY_BUDGET`] spread evenly, at least [`FLOOR_SAMPLES`] while the pass stays within
+/// [`MAX_SHADOW_RAYS`], clamped to [`MIN_SHADOW_SAMPLES`]..=[`MAX_SHADOW_SAMPLES`], rounded
+/// down to a square k x k.
 pub fn shadow_samples(receivers: usize) -> usize {
-    shadow_samples_for(receivers, 1)
-}
-
-/// Mean shadow samples per receiver for `receivers` receivers lit by `groups` emitter groups:
-/// the ray budget spread evenly, and at least [`MIN_SHADOW_SAMPLES`] per group up to
-/// [`GROUP_SAMPLE_GROUPS`] groups while the pass stays within [`MAX_SHADOW_RAYS`]; clamped,
-/// rounded down to a square k x k.
-///
-/// Each group takes the visible fraction of its own samples (a ratio estimator whose bias and
-/// noise fall as 1 / samples per group), so a receiver lit by several groups needs more rays
-/// than one lit by one. On the scenes of 60k-70k receivers (16 per receiver from the budget
-/// alone): the generated classroom (16 groups) 2.40% -> 2.30% against a 16,384-spp path
-/// tracer, b90_office 4.28% (bias +1.42%) -> 3.83% (+0.51%) against 8,192 spp, for 0.4 s and
-/// 0.3 s more direct light. Scenes lit by one group keep the even spread.
-pub fn shadow_samples_for(receivers: usize, groups: usize) -> usize {
     let receivers = receivers.max(1);
-    let per_group = MIN_SHADOW_SAMPLES * groups.clamp(1, GROUP_SAMPLE_GROUPS);
-    let floor = per_group.min(MAX_SHADOW_RAYS as usize / receivers);
+    let floor = FLOOR_SAMPLES.min(MAX_SHADOW_RAYS as usize / receivers);
     let wanted = (SHADOW_RAY_BUDGET / receivers)
         .max(floor)
         .clamp(MIN_SHADOW_SAMPLES, MAX_SHADOW_SAMPLES);
@@ -214,7 +207,7 @@ pub struct DirectLight<'a> {
 impl<'a> DirectLight<'a> {
     /// Prepares the direct light of `patches` (unit frame, normalized emission, as
     /// [`crate::mesh::build_patches`] makes them) for `receivers` receiving elements (which sets
-    /// the shadow samples per element, see [`shadow_samples_for`]).
+    /// the shadow samples per element, see [`shadow_samples`]).
     pub fn new(patches: &'a Patches, receivers: usize) -> DirectLight<'a> {
         DirectLight::with_back_faces(patches, receivers, None)
     }
@@ -236,7 +229,7 @@ impl<'a> DirectLight<'a> {
             rays: RayScene::new(&patches.corners, &patches.active),
             samples: 0,
         };
-        light.samples = shadow_samples_for(receivers, light.groups.len());
+        light.samples = shadow_samples(receivers);
         light
     }
 
