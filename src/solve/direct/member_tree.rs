@@ -75,8 +75,8 @@ impl MemberTree {
                 tree.nodes[parent].children[side] = index as u32;
             }
             let range = &mut tree.order[start..end];
-            let center = range.iter().map(|&i| geom(i).centroid).sum::<DVec3>()
-                / range.len() as f64;
+            let center =
+                range.iter().map(|&i| geom(i).centroid).sum::<DVec3>() / range.len() as f64;
             let radius = range
                 .iter()
                 .flat_map(|&i| geom(i).corners)
@@ -128,8 +128,8 @@ impl MemberTree {
             for &i in &tree.order[start as usize..end as usize] {
                 let c = geom(i).corners;
                 for (j, &across) in neighbours[i as usize].iter().enumerate() {
-                    let inside = across != NO_NEIGHBOUR
-                        && (start..end).contains(&rank[across as usize]);
+                    let inside =
+                        across != NO_NEIGHBOUR && (start..end).contains(&rank[across as usize]);
                     if !inside {
                         rim.push((c[j], c[(j + 1) % 3]));
                     }
@@ -167,7 +167,10 @@ pub(super) fn for_each_member(tree: &MemberTree, parts: &[Part], mut visit: impl
     for &part in parts {
         match part {
             Part::Member(i) => visit(i),
-            Part::Node(n) => tree.members(&tree.nodes[n as usize]).iter().for_each(|&i| visit(i)),
+            Part::Node(n) => tree
+                .members(&tree.nodes[n as usize])
+                .iter()
+                .for_each(|&i| visit(i)),
         }
     }
 }
@@ -197,10 +200,9 @@ pub(super) fn merge_collinear(edges: Vec<(DVec3, DVec3)>) -> Vec<(DVec3, DVec3)>
         let Some(candidates) = leaving.get(&point_key(b)) else {
             continue;
         };
-        if let Some(&j) = candidates
-            .iter()
-            .find(|&&j| j as usize != i && !absorbed[j as usize] && straight_on(a, b, edges[j as usize].1))
-        {
+        if let Some(&j) = candidates.iter().find(|&&j| {
+            j as usize != i && !absorbed[j as usize] && straight_on(a, b, edges[j as usize].1)
+        }) {
             absorbed[j as usize] = true;
             next[i] = Some(j);
         }
@@ -246,7 +248,12 @@ mod tests {
     fn collinear_runs_merge_and_keep_the_contour_sum() {
         let v = DVec3::new;
         // A square's rim, each side split in 3 (one split point moved off its line).
-        let corners = [v(0.0, 0.0, 0.0), v(1.0, 0.0, 0.0), v(1.0, 1.0, 0.0), v(0.0, 1.0, 0.0)];
+        let corners = [
+            v(0.0, 0.0, 0.0),
+            v(1.0, 0.0, 0.0),
+            v(1.0, 1.0, 0.0),
+            v(0.0, 1.0, 0.0),
+        ];
         let mut edges = Vec::new();
         for s in 0..4 {
             let (a, b) = (corners[s], corners[(s + 1) % 4]);
@@ -258,11 +265,17 @@ mod tests {
             edges.extend([(a, p(1.0 / 3.0)), (p(1.0 / 3.0), mid), (mid, b)]);
         }
         let merged = merge_collinear(edges.clone());
-        assert_eq!(merged.len(), 4 + 2, "three straight sides, one bent side in 3 pieces");
+        assert_eq!(
+            merged.len(),
+            4 + 2,
+            "three straight sides, one bent side in 3 pieces"
+        );
         let x = v(0.3, 0.4, 0.8);
         let n = v(0.1, -0.2, -1.0).normalize();
         let sum = |e: &[(DVec3, DVec3)]| -> f64 {
-            e.iter().map(|&(a, b)| geometry::lambert_edge(a - x, b - x, n)).sum()
+            e.iter()
+                .map(|&(a, b)| geometry::lambert_edge(a - x, b - x, n))
+                .sum()
         };
         assert!((sum(&merged) - sum(&edges)).abs() < 1e-14);
     }
