@@ -226,16 +226,11 @@ pub(super) fn merge_collinear(edges: Vec<(DVec3, DVec3)>) -> Vec<(DVec3, DVec3)>
         }
         merged.push((a, b));
     };
-    for start in 0..edges.len() {
-        if !absorbed[start] {
-            push_run(start, &mut visited);
-        }
+    for (start, _) in absorbed.iter().enumerate().filter(|(_, &a)| !a) {
+        push_run(start, &mut visited);
     }
-    for start in 0..edges.len() {
-        if !visited[start] {
-            merged.push(edges[start]);
-            visited[start] = true;
-        }
+    for (edge, _) in edges.iter().zip(&visited).filter(|(_, &v)| !v) {
+        merged.push(*edge);
     }
     merged
 }

@@ -663,7 +663,7 @@ impl<'a> DirectLight<'a> {
         //    entry point then an exit point (the members counter-clockwise about the group's
         //    normal put the group's inside on the decreasing side of an exit); each chord
         //    closes the contour from its exit back to its entry.
-        if crossings.len() % 2 != 0 {
+        if !crossings.len().is_multiple_of(2) {
             return None;
         }
         crossings.sort_by(|c, d| c.0.total_cmp(&d.0));
