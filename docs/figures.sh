@@ -71,11 +71,32 @@ accuracy() {
   cargo test --release --test sweep -- --nocapture > "$OUT/occluder.log" 2>&1
 }
 
-# performance.md, "Growth": the subdivided Cornell box from 1k to 1M triangles.
+# performance.md, "Growth": the subdivided Cornell box from 1k to 4M triangles, the bear in a
+# room subdivided, and the error at 66k and 258k against two path-traced references each.
 growth() {
-  for n in 1000 4000 16000 64000 256000 1000000; do
+  local sizes="1000 4000 16000 64000 256000 1000000 4000000"
+  for n in $sizes; do
     "$B" scene cornell-box --triangles "$n" --out "$OUT/cb_$n.obj"
-    "$B" solve "$OUT/cb_$n.obj" --quiet --report "$OUT/growth_$n.json"
+    "$B" solve "$OUT/cb_$n.obj" --quiet --report "$OUT/growth_$n.json" --triangles "$OUT/growth_$n.csv"
+  done
+  python3 docs/growth.py $(for n in $sizes; do echo "$OUT/growth_$n.json"; done)
+  if have "$MESHES/bear.obj"; then
+    "$B" scene in-room "$MESHES/bear.obj" --out "$OUT/bear_room.obj"
+    "$B" solve "$OUT/bear_room.obj" --quiet --report "$OUT/bear_none.json"
+    for l in 1 0.5 0.25 0.125; do
+      "$B" solve "$OUT/bear_room.obj" --max-edge "$l" --quiet --report "$OUT/bear_$l.json"
+    done
+    python3 docs/growth.py "$OUT"/bear_none.json "$OUT"/bear_1.json "$OUT"/bear_0.5.json \
+      "$OUT"/bear_0.25.json "$OUT"/bear_0.125.json
+  fi
+  for n in 64000:1024 256000:256; do
+    local size=${n%%:*} spp=${n##*:}
+    for seed in 11 12; do
+      "$B" reference "$OUT/cb_$size.obj" --spp "$spp" --seed "$seed" --quiet \
+        --triangles "$OUT/ref_${size}_$seed.csv" --report "$OUT/ref_${size}_$seed.json"
+    done
+    python3 docs/rms_error.py "$OUT/growth_$size.csv" "$OUT/ref_${size}_11.csv" \
+      "$OUT/ref_${size}_12.csv" --spp "$spp"
   done
 }
 

@@ -3,7 +3,8 @@
 
 Usage: python3 docs/growth.py growth_1000.json growth_4000.json ...
 
-One row per report (in the order given, smallest scene first): input triangles, elements,
+One row per report (in the order given, smallest scene first): patches (the input triangles,
+or their pieces under --max-edge), elements,
 cluster and exact links, links / (n log2 n), (element, link) pairs per sweep, sweeps, the
 seconds of each stage, total, peak memory; then the exponents of a least-squares fit of
 log(quantity) against log(n) over all rows and over the last three.
@@ -21,7 +22,8 @@ def load(path):
     st = s.get("stage_seconds", {})
     links = s["link_stats"]
     return {
-        "n": r["counts"]["input_triangles"],
+        # Patches: the input triangles, or their pieces under --max-edge.
+        "n": r["counts"]["patches"],
         "elements": s["elements"],
         "cluster": links["cluster_links"],
         "exact": links["exact_links"],
@@ -51,7 +53,7 @@ def slope(rows, key):
 def main(paths):
     rows = [load(p) for p in paths]
     print(
-        "| input triangles | elements | cluster links | exact links | links / (n log₂ n) "
+        "| patches | elements | cluster links | exact links | links / (n log₂ n) "
         "| element-link pairs per sweep | sweeps | tree | links | model | direct light "
         "| sweeps (s) | total | peak memory |"
     )
@@ -69,7 +71,6 @@ def main(paths):
         )
     for r in rows:
         r["links"] = r["cluster"] + r["exact"]
-        r["peak_gib"] = r["peak"]
     print()
     keys = ["links", "pairs", "tree", "links_s", "direct", "iterate", "total", "peak"]
     tail = rows[-3:]
