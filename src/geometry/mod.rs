@@ -385,17 +385,21 @@ impl Poly {
     }
 }
 
+/// Signed height of `c` over the plane through `p` with normal `n`, 0 within `tol` of it: the
+/// side [`clip_by_plane`] sees it on.
+pub fn plane_height(c: DVec3, p: DVec3, n: DVec3, tol: f64) -> f64 {
+    let h = n.dot(c - p);
+    if h.abs() <= tol {
+        0.0
+    } else {
+        h
+    }
+}
+
 /// Signed heights of `tri`'s corners over the plane through `p` with normal `n`, those within
 /// `tol` of it counted as 0: the sides [`clip_by_plane`] sees them on.
 pub fn plane_heights(tri: &Tri, p: DVec3, n: DVec3, tol: f64) -> [f64; 3] {
-    tri.map(|c| {
-        let h = n.dot(c - p);
-        if h.abs() <= tol {
-            0.0
-        } else {
-            h
-        }
-    })
+    tri.map(|c| plane_height(c, p, n, tol))
 }
 
 /// Splits `tri` by the plane through `p` with normal `n` into the part strictly in front

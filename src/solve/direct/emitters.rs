@@ -97,9 +97,6 @@ pub(super) struct EmitterGroup {
     /// Bounding sphere of the vertices: centre and radius.
     pub(super) center: DVec3,
     pub(super) radius: f64,
-    /// Largest bounding-sphere radius of a member (about its centroid, as
-    /// [`separation`] measures it).
-    pub(super) member_radius: f64,
     /// Every directed edge belongs to one member at most, so any subset of the members is
     /// bounded by the edges it does not share with itself (what a group cut by a receiver's
     /// plane needs).
@@ -119,6 +116,15 @@ pub(super) struct EmitterGroup {
 }
 
 impl EmitterGroup {
+    /// True when `x` lies clearly in front of every member's plane (beyond the members' spread
+    /// about the group's plane): the condition of the group's contour sum at `x`.
+    pub(super) fn clearly_in_front(&self, x: DVec3) -> bool {
+        let margin = self.normal_spread * ((x - self.center).length() + self.radius)
+            + self.thickness
+            + PLANE_EPS * self.radius;
+        self.normal.dot(x - self.centroid) > margin
+    }
+
     /// The member (index into [`Emitters`]) whose cumulative area interval holds `u` in [0, 1).
     pub(super) fn pick(&self, u: f64) -> usize {
         self.members[interval_of(&self.member_cdf, u)] as usize
@@ -245,10 +251,6 @@ fn build_group(emitters: &Emitters, members: Vec<u32>) -> EmitterGroup {
         .map(|&m| (emitters.geom[m as usize].normal - normal).length())
         .fold(0.0, f64::max);
     let member_cdf = cumulative(members.iter().map(|&m| emitters.geom[m as usize].area));
-    let member_radius = members
-        .iter()
-        .map(|&m| emitters.geom[m as usize].radius)
-        .fold(0.0, f64::max);
     let (neighbours, manifold) = edge_neighbours(emitters, &members);
     let tree = MemberTree::new(emitters, &members, &neighbours);
     let boundary = merge_collinear(boundary);
@@ -257,7 +259,6 @@ fn build_group(emitters: &Emitters, members: Vec<u32>) -> EmitterGroup {
         planar,
         tree,
         emission: emitters.emission[members[0] as usize],
-        member_radius,
         manifold,
         area,
         member_cdf,

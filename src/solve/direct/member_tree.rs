@@ -43,6 +43,13 @@ impl MemberNode {
     pub(super) fn is_leaf(&self) -> bool {
         self.children[0] == 0
     }
+
+    /// True when every member's bounding sphere (about its centroid, as [`separation`] measures
+    /// it) is farther than `gap` from `x`: each centroid lies in the node's sphere and each
+    /// member's radius is at most `member_radius`.
+    pub(super) fn farther_than(&self, x: DVec3, gap: f64) -> bool {
+        (x - self.center).length() - self.radius - self.member_radius > gap
+    }
 }
 
 /// The tree of one group (see the module documentation). Node 0 is the root.
@@ -151,6 +158,19 @@ impl MemberTree {
     /// The member positions (into the group's `members`) of `node`.
     pub(super) fn members(&self, node: &MemberNode) -> &[u32] {
         &self.order[node.start as usize..node.end as usize]
+    }
+
+    /// Visits the nodes below `root` top down, depth first: `visit(index, node)` is called for
+    /// each node reached and returns whether to go on into its children (a leaf's members are
+    /// the visitor's to take, through [`Self::members`]).
+    pub(super) fn walk(&self, root: u32, mut visit: impl FnMut(u32, &MemberNode) -> bool) {
+        let mut stack = vec![root];
+        while let Some(n) = stack.pop() {
+            let node = &self.nodes[n as usize];
+            if visit(n, node) && !node.is_leaf() {
+                stack.extend(node.children);
+            }
+        }
     }
 }
 

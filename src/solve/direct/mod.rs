@@ -423,29 +423,24 @@ impl<'a> DirectLight<'a> {
         }
         // Every corner of every member at height -tol or more, node by node.
         let tree = &group.tree;
-        let mut stack = vec![0u32];
-        while let Some(n) = stack.pop() {
-            let node = &tree.nodes[n as usize];
+        let mut in_front = true;
+        tree.walk(0, |_, node| {
             let h = height(node.center);
-            if h - node.radius >= -tol {
-                continue;
-            }
-            if h + node.radius < -tol {
+            if !in_front || h - node.radius >= -tol {
                 return false;
             }
-            if node.is_leaf() {
-                let corners = tree
+            if h + node.radius < -tol {
+                in_front = false;
+            } else if node.is_leaf() {
+                let mut corners = tree
                     .members(node)
                     .iter()
                     .flat_map(|&i| self.emitters.geom[group.members[i as usize] as usize].corners);
-                if corners.into_iter().any(|c| height(c) < -tol) {
-                    return false;
-                }
-            } else {
-                stack.extend(node.children);
+                in_front = !corners.any(|c| height(c) < -tol);
             }
-        }
-        true
+            in_front
+        });
+        in_front
     }
 
     /// Mean form factor of a group seen from the receiver, whose plane has the whole group in
@@ -466,11 +461,7 @@ impl<'a> DirectLight<'a> {
         let whole = [Part::Node(0)];
         let chosen = parts.unwrap_or(&whole);
         let x = receiver.centroid;
-        let height = group.normal.dot(x - group.centroid);
-        let margin = group.normal_spread * ((x - group.center).length() + group.radius)
-            + group.thickness
-            + PLANE_EPS * group.radius;
-        if height <= margin {
+        if !group.clearly_in_front(x) {
             let mut f = 0.0;
             for_each_member(tree, chosen, |i| {
                 f += self.emitter_form_factor(r, receiver, group.members[i as usize] as usize);
@@ -503,17 +494,11 @@ impl<'a> DirectLight<'a> {
                 geometry::lambert_form_factor(sum)
             }
         };
-        // Every member's centroid lies in the group's sphere, so no member is nearer the
-        // receiver's centroid than this; when that is far, every member's rule is one point.
-        let nearest_gap = (x - group.center).length() - group.radius - group.member_radius;
-        if nearest_gap > FAR_RATIO * receiver.size {
+        // When every member is far from the receiver's centroid, every member's rule is one
+        // point.
+        if tree.nodes[0].farther_than(x, FAR_RATIO * receiver.size) {
             return f.max(0.0);
         }
-        // The same bound node by node: only nodes near the receiver are visited.
-        let far = |node: &MemberNode| {
-            (x - node.center).length() - node.radius - node.member_radius
-                > FAR_RATIO * receiver.size
-        };
         let mut near_member = |i: u32| {
             let s = &self.emitters.geom[group.members[i as usize] as usize];
             let q = receiver_points(separation(receiver, s));
@@ -529,22 +514,17 @@ impl<'a> DirectLight<'a> {
             }
             f += near / (q * q) as f64 - geometry::point_form_factor(x, r.normal, &s.corners);
         };
-        let mut stack = Vec::new();
+        // The same bound node by node: only nodes near the receiver are visited.
         for &part in chosen {
             match part {
                 Part::Member(i) => near_member(i),
-                Part::Node(n) => stack.push(n),
-            }
-            while let Some(n) = stack.pop() {
-                let node = &tree.nodes[n as usize];
-                if far(node) {
-                    continue;
-                }
-                if node.is_leaf() {
-                    tree.members(node).iter().for_each(|&i| near_member(i));
-                } else {
-                    stack.extend(node.children);
-                }
+                Part::Node(n) => tree.walk(n, |_, node| {
+                    let near = !node.farther_than(x, FAR_RATIO * receiver.size);
+                    if near && node.is_leaf() {
+                        tree.members(node).iter().for_each(|&i| near_member(i));
+                    }
+                    near
+                }),
             }
         }
         f.max(0.0)
@@ -568,22 +548,19 @@ impl<'a> DirectLight<'a> {
         let tree = &group.tree;
         let height = |p: DVec3| r.normal.dot(p - r.corners[0]);
         let mut f = 0.0;
-        let mut stack = vec![0u32];
-        while let Some(n) = stack.pop() {
-            let node = &tree.nodes[n as usize];
+        tree.walk(0, |n, node| {
             // At least every member's own tolerance below.
             let tol = plane_tol(receiver.size.max(node.size));
             let h = height(node.center);
             if h - node.radius > tol {
                 parts.push(Part::Node(n));
-                continue;
+                return false;
             }
             if h + node.radius < -tol {
-                continue;
+                return false;
             }
             if !node.is_leaf() {
-                stack.extend(node.children);
-                continue;
+                return true;
             }
             for &i in tree.members(node) {
                 let k = group.members[i as usize] as usize;
@@ -600,7 +577,8 @@ impl<'a> DirectLight<'a> {
                     f += self.emitter_form_factor(r, receiver, k);
                 }
             }
-        }
+            false
+        });
         if !parts.is_empty() {
             f += self.group_form_factor(r, receiver, group, Some(parts));
         }
@@ -624,23 +602,13 @@ impl<'a> DirectLight<'a> {
         group: &EmitterGroup,
     ) -> Option<f64> {
         let x = receiver.centroid;
-        let margin = group.normal_spread * ((x - group.center).length() + group.radius)
-            + group.thickness
-            + PLANE_EPS * group.radius;
-        if group.normal.dot(x - group.centroid) <= margin {
+        if !group.clearly_in_front(x) {
             return None;
         }
         let tree = &group.tree;
         // Every member's own clipping tolerance is at most this one.
         let tol = plane_tol(receiver.size.max(tree.nodes[0].size));
-        let height = |p: DVec3| {
-            let h = r.normal.dot(p - r.corners[0]);
-            if h.abs() <= tol {
-                0.0
-            } else {
-                h
-            }
-        };
+        let height = |p: DVec3| geometry::plane_height(p, r.corners[0], r.normal, tol);
         let edge = |a: DVec3, b: DVec3| geometry::lambert_edge(a - x, b - x, r.normal);
         // 1. The boundary in front; where it leaves and re-enters the front half-space.
         let along = group.normal.cross(r.normal);
@@ -677,22 +645,15 @@ impl<'a> DirectLight<'a> {
             sum += edge(exit, entry);
         }
         let mut f = geometry::lambert_form_factor(sum);
-        // 3. Near members: their own receiver points in place of the centroid.
-        let nearest_gap = (x - group.center).length() - group.radius - group.member_radius;
-        if nearest_gap > FAR_RATIO * receiver.size {
-            return Some(f.max(0.0));
-        }
-        let mut stack = vec![0u32];
-        while let Some(n) = stack.pop() {
-            let node = &tree.nodes[n as usize];
-            let far = (x - node.center).length() - node.radius - node.member_radius
-                > FAR_RATIO * receiver.size;
+        // 3. Near members: their own receiver points in place of the centroid (nodes wholly
+        //    far from the receiver or behind its plane have none).
+        tree.walk(0, |_, node| {
+            let far = node.farther_than(x, FAR_RATIO * receiver.size);
             if far || r.normal.dot(node.center - r.corners[0]) + node.radius < -tol {
-                continue;
+                return false;
             }
             if !node.is_leaf() {
-                stack.extend(node.children);
-                continue;
+                return true;
             }
             for &i in tree.members(node) {
                 let k = group.members[i as usize] as usize;
@@ -707,7 +668,8 @@ impl<'a> DirectLight<'a> {
                     .sum();
                 f += self.emitter_form_factor(r, receiver, k) - at_centroid;
             }
-        }
+            false
+        });
         Some(f.max(0.0))
     }
 
