@@ -58,8 +58,32 @@ const BEHIND_NOTHING: f64 = 1e-12;
 pub fn exposed_backs(patches: &Patches) -> Vec<bool> {
     let twinned = back_to_back_twins(patches);
     let scene = RayScene::new(&patches.corners, &patches.active);
+    // The box of every active patch: a patch with all of it on or in front of its plane has
+    // nothing behind it for a back ray to meet (the walls of a room shell, of the 1M-triangle
+    // box 90% of its patches and 4M rays).
+    let (lo, hi) = (0..patches.len())
+        .filter(|&p| patches.active[p])
+        .flat_map(|p| patches.corners[p])
+        .fold(
+            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+            |(lo, hi), v| (lo.min(v), hi.max(v)),
+        );
+    let box_corners: [DVec3; 8] = std::array::from_fn(|i| {
+        DVec3::new(
+            if i & 1 == 0 { lo.x } else { hi.x },
+            if i & 2 == 0 { lo.y } else { hi.y },
+            if i & 4 == 0 { lo.z } else { hi.z },
+        )
+    });
+    let nothing_behind = |p: usize| {
+        let (tri, n) = (&patches.corners[p], patches.normal[p]);
+        box_corners
+            .iter()
+            .all(|&c| n.dot(c - tri[0]) >= -BEHIND_NOTHING)
+    };
     let candidates: Vec<bool> = (0..patches.len())
-        .map(|p| patches.active[p] && !twinned[p])
+        .into_par_iter()
+        .map(|p| patches.active[p] && !twinned[p] && !nothing_behind(p))
         .collect();
     // Hits on fronts first; then, for two-sided patches still unexposed, hits on the back
     // faces of two-sided patches found exposed (lit) count too.
@@ -92,23 +116,6 @@ fn exposed_where(
     let active = patches.active_count().max(1);
     let rays = (BACK_RAY_BUDGET / active).clamp(BACK_RAYS_MIN, BACK_RAYS_MAX);
     let side = (rays as f64).sqrt().ceil() as usize;
-    // The box of every active patch: a patch with all of it on or in front of its plane has
-    // nothing behind it for a back ray to meet (the walls of a room shell, of the 1M-triangle
-    // box 90% of its patches and 4M rays).
-    let (lo, hi) = (0..patches.len())
-        .filter(|&p| patches.active[p])
-        .flat_map(|p| patches.corners[p])
-        .fold(
-            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
-            |(lo, hi), v| (lo.min(v), hi.max(v)),
-        );
-    let box_corners: [DVec3; 8] = std::array::from_fn(|i| {
-        DVec3::new(
-            if i & 1 == 0 { lo.x } else { hi.x },
-            if i & 2 == 0 { lo.y } else { hi.y },
-            if i & 4 == 0 { lo.z } else { hi.z },
-        )
-    });
     (0..patches.len())
         .into_par_iter()
         .map(|p| {
@@ -116,12 +123,6 @@ fn exposed_where(
                 return false;
             }
             let (tri, n) = (&patches.corners[p], patches.normal[p]);
-            if box_corners
-                .iter()
-                .all(|&c| n.dot(c - tri[0]) >= -BEHIND_NOTHING)
-            {
-                return false;
-            }
             let mut rng = Rng::new(0x6261_636b, p as u64);
             let (mut fronts, mut hits) = (0usize, 0usize);
             for k in 0..rays {
