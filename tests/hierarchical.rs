@@ -84,19 +84,27 @@ fn refined_to_element_pairs_equals_dense() {
     ] {
         let patches = build_patches(&scene, max_edge);
         for two_sided in [false, true] {
+            // Both solved to far below the comparison's tolerance: the same couplings have the
+            // same fixed point, whatever the iteration (the dense solver sweeps plainly, the
+            // hierarchical one accelerates).
             let options = SolverOptions {
                 epsilon: 0.0,
                 two_sided,
-                // Plain sweeps, as the dense solver's: the same 12 sweeps give the same state.
-                acceleration_depth: 0,
-                max_iterations: 12,
-                tol: 1e-9,
+                max_iterations: 500,
+                tol: 1e-8,
                 clamp_negative: false,
                 ..SolverOptions::default()
             };
             let dense = solve_dense(&patches, &options, &Progress::hidden()).unwrap();
             let hier = solve_hierarchical(&patches, &options, &Progress::hidden()).unwrap();
-            assert_eq!(dense.stats.iterations, hier.stats.iterations);
+            assert!(
+                dense.stats.converged && hier.stats.converged,
+                "{name}: dense converged {} after {}, hierarchical {} after {}",
+                dense.stats.converged,
+                dense.stats.iterations,
+                hier.stats.converged,
+                hier.stats.iterations
+            );
             for (p, (a, b)) in dense
                 .patch_radiance
                 .iter()
