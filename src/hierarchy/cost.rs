@@ -41,7 +41,8 @@ pub struct ModelCounts {
     pub entries: Option<u64>,
     /// Stored antiradiance slots (live bins); `None`: half of every element's bins.
     pub slots: Option<u64>,
-    /// Normal groups of the sender nodes; `None`: one per element.
+    /// Normal groups of the sender nodes; `None`: the costs' share per element
+    /// ([`HierarchicalCosts::with_group_share`], else one per element).
     pub groups: Option<u64>,
 }
 
@@ -52,6 +53,9 @@ pub struct HierarchicalCosts {
     bins: u64,
     /// Colour channels of the sweep state (1 for a grey scene, else 3).
     channels: u64,
+    /// Sender normal groups per element assumed while the groups are not known
+    /// ([`ModelCounts::groups`] `None`); 1 unless set by [`HierarchicalCosts::with_group_share`].
+    groups_per_element: f64,
 }
 
 impl HierarchicalCosts {
@@ -60,6 +64,22 @@ impl HierarchicalCosts {
         HierarchicalCosts {
             bins: (bins_per_side * bins_per_side) as u64,
             channels: channels as u64,
+            groups_per_element: 1.0,
+        }
+    }
+
+    /// These costs with `share` sender normal groups per element assumed until the groups are
+    /// known (measured on the tree before its links are refined: on-demand splits only add
+    /// coplanar pieces, which form fewer groups per element). A share that is not finite and
+    /// positive leaves the assumption at 1.
+    pub fn with_group_share(self, share: f64) -> HierarchicalCosts {
+        HierarchicalCosts {
+            groups_per_element: if share.is_finite() && share > 0.0 {
+                share
+            } else {
+                1.0
+            },
+            ..self
         }
     }
 
@@ -81,7 +101,9 @@ impl HierarchicalCosts {
             .entries
             .unwrap_or(c.exact_pairs.saturating_mul(ENTRIES_PER_PAIR));
         let slots = c.slots.unwrap_or(n.saturating_mul(nb.div_ceil(2)));
-        let groups = c.groups.unwrap_or(n);
+        let groups = c
+            .groups
+            .unwrap_or((n as f64 * self.groups_per_element).ceil() as u64);
         let tree = c.nodes * size_of::<Node>() as u64;
         let link = CLUSTER_LINK_BYTES;
         let entry = size_of::<Entry>() as u64;
@@ -108,7 +130,9 @@ impl HierarchicalCosts {
         // antiradiance slots (two copies and the returned state), link intensities, solution.
         let links = c.cluster_links * link + c.nodes * (4 + 16) + exact + n * 4;
         let elements = n * (88 + 16 * ch + 24 + 8 * words + 4 + 48);
-        let group = groups * (36 + 12 + 24 * (1 + nb) + 8 * ch * (1 + nb)) + n * 4;
+        // Per group: normal, area, back flag, parent, child-parent pair; per sweep its sums of B
+        // (front and back faces) and of every bin.
+        let group = groups * (48 + 8 * ch * (2 + nb)) + n * 4;
         let state = slots * 4 * ch * 3 + n * 8 * ch * 2;
         let sweeps = tree
             + links

@@ -211,6 +211,20 @@ impl SenderGroups {
         groups
     }
 
+    /// Normal groups per element of `tree` as it stands, its leaves as the elements (the tree
+    /// is finalized for it): what the memory estimate assumes before the links are refined.
+    pub(super) fn share(tree: &mut ClusterTree) -> f64 {
+        tree.finalize();
+        let leaves = || tree.elements.iter().map(|&i| &tree.nodes[i as usize]);
+        let area: Vec<f64> = leaves().map(|n| n.area).collect();
+        let normal: Vec<DVec3> = leaves()
+            .map(|n| n.plane.map(|p| p.0).unwrap_or(DVec3::Z))
+            .collect();
+        let back: Vec<bool> = leaves().map(|n| n.blocks_back).collect();
+        let groups = SenderGroups::build(tree, &area, &normal, &back);
+        groups.normal.len() as f64 / area.len().max(1) as f64
+    }
+
     /// True when node `i` pulls per group.
     pub(super) fn is_grouped(&self, i: u32) -> bool {
         let (g0, g1) = self.range[i as usize];

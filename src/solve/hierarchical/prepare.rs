@@ -114,6 +114,11 @@ impl Prepared {
             params.max_split_depth,
             params.min_radius,
         );
+        // The budget assumes the sender groups per element of the tree as it stands.
+        let link_budget = &LinkBudget {
+            costs: (link_budget.costs).with_group_share(SenderGroups::share(&mut tree)),
+            ..*link_budget
+        };
         let t1 = Instant::now();
         let links = links::refine(
             &mut tree,
