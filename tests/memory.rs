@@ -152,6 +152,40 @@ fn a_small_memory_limit_coarsens_with_a_warning() {
     );
     let rows = std::fs::read_to_string(&csv).unwrap().lines().count();
     assert_eq!(rows, 1 + 46, "header and one row per input triangle");
+    // The attempts share one tree, each undoing the splits of the one before: the model that
+    // fitted is the one a solve asking for it builds from scratch.
+    let json_direct = tmp.path().join("direct.json");
+    let (epsilon, split_depth, bins) = (
+        m["epsilon"].to_string(),
+        m["split_depth"].to_string(),
+        m["bins"].to_string(),
+    );
+    let o = run(&[
+        "solve",
+        s(&cornell),
+        "--max-edge",
+        "100",
+        "--preset",
+        "accurate",
+        "--epsilon",
+        &epsilon,
+        "--split-depth",
+        &split_depth,
+        "--bins",
+        &bins,
+        "--report",
+        s(&json_direct),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let direct = report(&json_direct);
+    for key in ["elements", "links"] {
+        assert_eq!(r["stats"][key], direct["stats"][key], "{key}");
+    }
+    assert_eq!(
+        r["stats"]["link_stats"]["exact_links"],
+        direct["stats"]["link_stats"]["exact_links"]
+    );
 }
 
 /// Bad sizes are a one-line command-line error (exit code 2) naming the flag; good ones parse.

@@ -634,6 +634,25 @@ impl ClusterTree {
         first
     }
 
+    /// Undoes every [`ClusterTree::split_leaf`] made since the tree had `len` nodes: the pieces
+    /// are removed and the leaves they came from are leaves again (the element order is
+    /// cleared; [`ClusterTree::finalize`] sets it again). `len` must be a node count the tree
+    /// had before those splits, with no split made before it undone since.
+    pub fn unsplit(&mut self, len: usize) {
+        if len >= self.nodes.len() {
+            return;
+        }
+        let first_piece = len as u32;
+        self.nodes.truncate(len);
+        for node in &mut self.nodes {
+            if node.child_count > 0 && node.first_child >= first_piece {
+                node.first_child = NONE;
+                node.child_count = 0;
+            }
+        }
+        self.elements.clear();
+    }
+
     /// Splits every leaf whose radius exceeds `ratio` times its distance from one of `points`
     /// (point and spot lights, unit frame) that lies in front of it (either side of a two-sided
     /// leaf), and its pieces in turn, while above `min_radius` and under `max_depth` splits: a
@@ -866,6 +885,47 @@ mod tests {
         let mut behind = build();
         let below = unit(DVec3::new(0.0, -0.05, 0.0));
         assert_eq!(behind.split_toward_points(&[below], 0.5, 4, 0.0), 0);
+    }
+
+    /// Splits undone give back the tree they were made on, and splitting it again gives the
+    /// same tree as splitting a fresh one (the attempts of a coarsened solve share one tree).
+    #[test]
+    fn unsplit_restores_the_tree() {
+        let patches = build_patches(&curved_scene(), None);
+        let mut fresh = ClusterTree::build(&patches);
+        let len = fresh.nodes.len();
+        let mut tree = fresh.clone();
+        let leaves: Vec<u32> = (0..len as u32)
+            .filter(|&i| tree.nodes[i as usize].is_leaf())
+            .collect();
+        for &leaf in leaves.iter().step_by(3) {
+            let first = tree.split_leaf(leaf);
+            tree.split_leaf(first);
+        }
+        assert!(tree.nodes.len() > len + leaves.len());
+        tree.unsplit(len);
+        let key = |t: &ClusterTree| {
+            t.nodes
+                .iter()
+                .map(|n| {
+                    (
+                        n.first_child,
+                        n.child_count,
+                        n.parent,
+                        n.patch,
+                        n.split_depth,
+                    )
+                })
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(key(&tree), key(&fresh));
+        for t in [&mut tree, &mut fresh] {
+            t.split_leaf(leaves[1]);
+            t.finalize();
+        }
+        assert_eq!(key(&tree), key(&fresh));
+        assert_eq!(tree.elements, fresh.elements);
+        tree.validate().unwrap();
     }
 
     #[test]

@@ -7,6 +7,41 @@ use super::*;
 /// light in front of it ([`ClusterTree::split_toward_points`]).
 pub const LIGHT_SPLIT_RATIO: f64 = 0.5;
 
+/// The cluster tree of a scene before any on-demand split, with the sides of each patch that
+/// block light: built once and kept by the attempts of [`Prepared::new`] (each undoes the
+/// splits of the one before, [`ClusterTree::unsplit`]), since coarsening changes neither.
+pub(super) struct BaseTree {
+    pub(super) tree: ClusterTree,
+    /// Node count before any split.
+    nodes: usize,
+    /// Per patch: blocks light arriving at its back ([`model::Backs::blocking`]).
+    back_blocking: Vec<bool>,
+    /// Per patch: two-sided, with a back face of its own ([`model::Backs::faces`]).
+    two_sided: Vec<bool>,
+    /// Seconds the tree and the sides took, until the first attempt counts them.
+    seconds: Option<f64>,
+}
+
+impl BaseTree {
+    pub(super) fn new(patches: &Patches, options: &SolverOptions) -> BaseTree {
+        let t0 = Instant::now();
+        let mut tree = ClusterTree::build(patches);
+        let model::Backs {
+            blocking: back_blocking,
+            faces: two_sided,
+        } = model::Backs::of(patches, options);
+        tree.mark_back_blocking(&back_blocking);
+        tree.mark_two_sided(&two_sided);
+        BaseTree {
+            nodes: tree.nodes.len(),
+            tree,
+            back_blocking,
+            two_sided,
+            seconds: Some(t0.elapsed().as_secs_f64()),
+        }
+    }
+}
+
 impl Prepared {
     /// Builds the tree and refines the links for `patches` within the memory limit of
     /// `options` ([`SolverOptions::memory_limit_bytes`], see [`crate::solve::budget`]): a model whose
@@ -31,6 +66,7 @@ impl Prepared {
             ));
         }
         let channels = channels_needed(patches);
+        let mut base = BaseTree::new(patches, options);
         let mut model = options.clone();
         let mut coarsened = Vec::new();
         let mut attempts = 0;
@@ -43,7 +79,8 @@ impl Prepared {
             };
             attempts += 1;
             let t_attempt = Instant::now();
-            let over = match Prepared::build(patches, &model, record_culled, &link_budget) {
+            let attempt = Prepared::build(patches, &model, record_culled, &link_budget, &mut base);
+            let over = match attempt {
                 Ok(mut prepared) => {
                     coarsened.append(&mut prepared.memory.coarsened);
                     prepared.memory = MemoryStats {
@@ -85,24 +122,22 @@ impl Prepared {
         }
     }
 
-    /// One attempt of [`Prepared::new`] with the model of `options`: tree, links, element
-    /// arrays, groups, live bins and (when it fits) the pair cache, or [`OverBudget`] as soon
-    /// as the estimate exceeds `link_budget`.
-    fn build(
+    /// One attempt of [`Prepared::new`] with the model of `options`: tree (from `base`,
+    /// every split of an earlier attempt undone), links, element arrays, groups, live bins and
+    /// (when it fits) the pair cache, or [`OverBudget`] as soon as the estimate exceeds
+    /// `link_budget` (the tree is then handed back to `base`).
+    pub(super) fn build(
         patches: &Patches,
         options: &SolverOptions,
         record_culled: bool,
         link_budget: &LinkBudget,
+        base: &mut BaseTree,
     ) -> std::result::Result<Prepared, OverBudget> {
         let bins = Bins::new(options.bins);
         let t0 = Instant::now();
-        let mut tree = ClusterTree::build(patches);
-        let model::Backs {
-            blocking: back_blocking,
-            faces: two_sided,
-        } = model::Backs::of(patches, options);
-        tree.mark_back_blocking(&back_blocking);
-        tree.mark_two_sided(&two_sided);
+        let mut tree = std::mem::take(&mut base.tree);
+        tree.unsplit(base.nodes);
+        let (back_blocking, two_sided) = (&base.back_blocking, &base.two_sided);
         // Every face gets its own direct light from point and spot lights
         // (`Prepared::light_source_of_faces`): elements near them are made small enough for it
         // to vary between them.
@@ -120,14 +155,20 @@ impl Prepared {
             ..*link_budget
         };
         let t1 = Instant::now();
-        let links = links::refine(
+        let links = match links::refine(
             &mut tree,
             &bins,
             &params,
             &options.coupling(),
             record_culled,
             link_budget,
-        )?;
+        ) {
+            Ok(links) => links,
+            Err(over) => {
+                base.tree = tree;
+                return Err(over);
+            }
+        };
         let t2 = Instant::now();
         debug_assert!(tree.validate().is_ok(), "{:?}", tree.validate());
         let mut prepared = Prepared {
@@ -155,7 +196,7 @@ impl Prepared {
             budget: link_budget.budget,
             memory: MemoryStats::default(),
             timings: HierarchyTimings {
-                tree: (t1 - t0).as_secs_f64(),
+                tree: base.seconds.take().unwrap_or(0.0) + (t1 - t0).as_secs_f64(),
                 links: (t2 - t1).as_secs_f64(),
                 model: 0.0,
                 iterate: 0.0,
@@ -176,7 +217,10 @@ impl Prepared {
         prepared.albedo_grey = prepared.elem_albedo.iter().all(|&a| model::is_grey(a));
         prepared.convex = model::is_convex_enclosure(&prepared.tree);
         prepared.use_anti = options.antiradiance && !prepared.convex;
-        prepared.fit_model(patches, link_budget)?;
+        if let Err(over) = prepared.fit_model(patches, link_budget) {
+            base.tree = std::mem::take(&mut prepared.tree);
+            return Err(over);
+        }
         prepared.timings.model = t2.elapsed().as_secs_f64();
         Ok(prepared)
     }

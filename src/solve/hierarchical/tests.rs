@@ -1,3 +1,4 @@
+use super::prepare::BaseTree;
 use super::*;
 use crate::mesh::build_patches;
 use crate::scene::generated;
@@ -92,4 +93,47 @@ fn live_bin_slots_follow_the_mask() {
     assert_eq!(live.slot(0, 4), None);
     assert_eq!(live.slot(1, 70), Some(4));
     assert_eq!(live.slots(), 5);
+}
+
+/// The attempts of a coarsened solve share one tree: an attempt after one that split leaves
+/// builds the model a fresh tree gives.
+#[test]
+fn an_attempt_after_a_split_one_builds_the_fresh_model() {
+    let patches = build_patches(&generated::cornell_box(), None);
+    let fine = SolverOptions::accurate();
+    let coarse = SolverOptions {
+        epsilon: 1.0,
+        split_depth: 2,
+        ..fine.clone()
+    };
+    let budget = LinkBudget::unlimited(fine.bins);
+    let mut base = BaseTree::new(&patches, &fine);
+    let nodes = base.tree.nodes.len();
+    let first = Prepared::build(&patches, &fine, false, &budget, &mut base).unwrap();
+    assert!(
+        first.tree.nodes.len() > nodes,
+        "the fine model splits leaves"
+    );
+    // As a failed attempt does: the tree goes back to the base with its splits.
+    base.tree = first.tree;
+    let again = Prepared::build(&patches, &coarse, false, &budget, &mut base).unwrap();
+    let fresh = Prepared::build(
+        &patches,
+        &coarse,
+        false,
+        &budget,
+        &mut BaseTree::new(&patches, &coarse),
+    )
+    .unwrap();
+    assert_eq!(again.tree.nodes.len(), fresh.tree.nodes.len());
+    assert_eq!(again.links.cluster.len(), fresh.links.cluster.len());
+    assert_eq!(again.links.exact_sender, fresh.links.exact_sender);
+    let senders = |p: &Prepared| {
+        p.links
+            .cluster
+            .iter()
+            .map(|l| (l.sender, l.receiver, l.bin))
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(senders(&again), senders(&fresh));
 }
