@@ -101,14 +101,6 @@ pub const CONVEX_TOLERANCE: f64 = 1e-7;
 /// (a sweep that did not contract).
 pub const MAX_CONTRACTION: f64 = 0.9999;
 
-/// Relative spread (dimensionless) within which the contraction ratios of the last sweeps count
-/// as settled, so that the solver may extrapolate over the geometric tail
-/// ([`crate::solve::Convergence::extrapolation_factor`]). A ratio off by this much still removes
-/// most of the dominant mode: at q = 0.5, a ratio 5% low leaves 5% of the tail. With 2%, the
-/// ratios of the 258k-triangle Cornell box (0.49 and 0.53 in turn, drifting up) settled only
-/// after 10 of its 11 sweeps.
-pub const SETTLED_CONTRACTION: f64 = 0.05;
-
 /// A colour is grey when its channels agree to this relative amount (dimensionless): exact up
 /// to the rounding of reading the same number three times.
 pub const GREY_RELATIVE: f64 = 1e-12;

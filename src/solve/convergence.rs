@@ -1,7 +1,7 @@
 //! The iteration steps both solvers share: the change of a sweep, the convergence estimate, and
 //! what happens at the end of every sweep ([`end_sweep`]).
 
-use crate::geometry::tolerances::{MAX_CONTRACTION, SETTLED_CONTRACTION};
+use crate::geometry::tolerances::MAX_CONTRACTION;
 use crate::mesh::Patches;
 use crate::progress::Progress;
 use crate::solve::health::Guard;
@@ -81,18 +81,26 @@ impl Convergence {
 impl Convergence {
     /// The factor `q / (1 - q)` by which to extrapolate the last sweep's change (`x += k (x_k -
     /// x_(k-1))`, the geometric tail of a linear iteration contracting by `q`), when the
-    /// contraction ratio has settled ([`settled_ratio`]) in (0.05, [`MAX_CONTRACTION`]), and
-    /// three sweeps have passed since the last extrapolation. `None` otherwise.
+    /// contraction ratio has settled: the last three ratios agree within 2% and lie in (0.05,
+    /// [`MAX_CONTRACTION`]), and three sweeps have passed since the last extrapolation. `None` otherwise.
     ///
     /// The tail of a Jacobi iteration is dominated by one slowly decaying mode (for a closed
     /// room, the overall light level), so one extrapolation removes most of what many sweeps
     /// would: at albedo 0.75, about half the sweeps; near albedo 1, nearly all of them.
+    ///
+    /// Ratios that alternate between two values are not settled: the change then carries a
+    /// mode that changes sign from sweep to sweep, which a jump along the last change
+    /// amplifies. Measured: taking the geometric mean of consecutive pairs as settled (within
+    /// 5%) saved 2 of the 258k-triangle Cornell box's 11 sweeps, but took the 4M-triangle box
+    /// (4x4 bins) from 13 sweeps to 30.
     pub fn extrapolation_factor(&mut self) -> Option<f64> {
         if self.since_extrapolation < 3 || self.ratios.len() < 3 {
             return None;
         }
-        let q = settled_ratio(&self.ratios)?;
-        if !(q > 0.05 && q < MAX_CONTRACTION) {
+        let last = &self.ratios[self.ratios.len() - 3..];
+        let q = last[2];
+        let settled = last.iter().all(|r| (r - q).abs() <= 0.02 * q);
+        if !(settled && q > 0.05 && q < MAX_CONTRACTION) {
             return None;
         }
         self.since_extrapolation = 0;
@@ -102,29 +110,6 @@ impl Convergence {
         self.ratios.clear();
         Some(q / (1.0 - q))
     }
-}
-
-/// The contraction ratio of the last sweeps when it has settled: the last three ratios agree
-/// within [`SETTLED_CONTRACTION`] of the newest, or, for an iteration whose ratios alternate
-/// between two values (two modes decaying alike, one of them changing sign), the geometric
-/// means of the last three consecutive pairs of ratios do. `None` otherwise (or with fewer
-/// than three ratios).
-fn settled_ratio(ratios: &[f64]) -> Option<f64> {
-    let agree = |r: &[f64]| {
-        let q = r[r.len() - 1];
-        r.iter()
-            .all(|x| (x - q).abs() <= SETTLED_CONTRACTION * q)
-            .then_some(q)
-    };
-    let n = ratios.len();
-    if n < 3 {
-        return None;
-    }
-    agree(&ratios[n - 3..]).or_else(|| {
-        let r = ratios.get(n.checked_sub(4)?..)?;
-        let pairs: Vec<f64> = r.windows(2).map(|w| (w[0] * w[1]).sqrt()).collect();
-        agree(&pairs)
-    })
 }
 
 /// Fewest sweeps before convergence may be declared.
@@ -235,45 +220,31 @@ pub fn end_sweep(
 mod tests {
     use super::*;
 
+    /// Residuals contracting by a steady 0.5: one jump once three ratios agree, by q / (1 - q).
     #[test]
-    fn steady_ratios_settle() {
-        assert_eq!(settled_ratio(&[0.5, 0.5, 0.5]), Some(0.5));
-        assert_eq!(settled_ratio(&[0.9, 0.51, 0.5, 0.49]), Some(0.49));
-        assert_eq!(settled_ratio(&[0.5, 0.5]), None);
-    }
-
-    #[test]
-    fn drifting_ratios_do_not_settle() {
-        assert_eq!(settled_ratio(&[0.3, 0.5, 0.7]), None);
-        assert_eq!(settled_ratio(&[0.3, 0.4, 0.5, 0.6]), None);
-    }
-
-    /// The 258k-triangle Cornell box's ratios alternate: each pair's geometric mean is steady.
-    #[test]
-    fn alternating_ratios_settle_at_their_pairs_mean() {
-        let q = settled_ratio(&[0.462, 0.523, 0.494, 0.526]).expect("settled");
-        assert!((q - (0.494f64 * 0.526).sqrt()).abs() < 1e-12, "{q}");
-        // Alternating by more than the pairs' means can absorb.
-        assert_eq!(settled_ratio(&[0.2, 0.8, 0.3, 0.9]), None);
-    }
-
-    /// Residuals contracting by 0.5 then 0.4 in turn: the solver jumps once the pairs settle,
-    /// by q / (1 - q) of the last change, and not again for three sweeps.
-    #[test]
-    fn alternating_contraction_extrapolates_once_settled() {
+    fn a_steady_contraction_extrapolates() {
         let mut c = Convergence::default();
         let mut r = 1.0;
         let mut jumps = Vec::new();
-        for k in 0..12 {
+        for k in 0..6 {
             c.update(r, 1e-9);
             if let Some(f) = c.extrapolation_factor() {
                 jumps.push((k, f));
             }
+            r *= 0.5;
+        }
+        assert_eq!(jumps, [(3, 1.0)]);
+    }
+
+    /// Residuals contracting by 0.5 and 0.4 in turn (the 4M-triangle box's sweeps): no jump.
+    #[test]
+    fn an_alternating_contraction_does_not_extrapolate() {
+        let mut c = Convergence::default();
+        let mut r = 1.0;
+        for k in 0..12 {
+            c.update(r, 1e-9);
+            assert_eq!(c.extrapolation_factor(), None, "sweep {k}");
             r *= if k % 2 == 0 { 0.5 } else { 0.4 };
         }
-        let q = 0.2f64.sqrt();
-        assert!(!jumps.is_empty() && jumps[0].0 == 4, "{jumps:?}");
-        assert!((jumps[0].1 - q / (1.0 - q)).abs() < 1e-9, "{jumps:?}");
-        assert!(jumps.windows(2).all(|w| w[1].0 - w[0].0 >= 3), "{jumps:?}");
     }
 }
