@@ -18,8 +18,8 @@ pub(super) struct BaseTree {
     back_blocking: Vec<bool>,
     /// Per patch: two-sided, with a back face of its own ([`model::Backs::faces`]).
     two_sided: Vec<bool>,
-    /// Seconds the tree and the sides took, until the first attempt counts them.
-    seconds: Option<f64>,
+    /// Seconds the tree and the sides took.
+    seconds: f64,
 }
 
 impl BaseTree {
@@ -37,7 +37,7 @@ impl BaseTree {
             tree,
             back_blocking,
             two_sided,
-            seconds: Some(t0.elapsed().as_secs_f64()),
+            seconds: t0.elapsed().as_secs_f64(),
         }
     }
 }
@@ -82,6 +82,7 @@ impl Prepared {
             let attempt = Prepared::build(patches, &model, record_culled, &link_budget, &mut base);
             let over = match attempt {
                 Ok(mut prepared) => {
+                    prepared.timings.tree += base.seconds;
                     coarsened.append(&mut prepared.memory.coarsened);
                     prepared.memory = MemoryStats {
                         limit_bytes: budget.limit,
@@ -196,7 +197,7 @@ impl Prepared {
             budget: link_budget.budget,
             memory: MemoryStats::default(),
             timings: HierarchyTimings {
-                tree: base.seconds.take().unwrap_or(0.0) + (t1 - t0).as_secs_f64(),
+                tree: (t1 - t0).as_secs_f64(),
                 links: (t2 - t1).as_secs_f64(),
                 model: 0.0,
                 iterate: 0.0,
