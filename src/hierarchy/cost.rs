@@ -94,13 +94,11 @@ impl HierarchicalCosts {
     /// the sweeps (tree, links, element arrays, sender groups, stored bins, state, link
     /// intensities, solution).
     pub fn bytes(&self, c: &ModelCounts) -> u64 {
-        let (nb, ch) = (self.bins, self.channels);
-        let words = nb.div_ceil(64);
+        let words = self.bins.div_ceil(64);
         let n = c.elements;
         let entries = c
             .entries
             .unwrap_or(c.exact_pairs.saturating_mul(ENTRIES_PER_PAIR));
-        let slots = c.slots.unwrap_or(n.saturating_mul(nb.div_ceil(2)));
         let groups = c
             .groups
             .unwrap_or((n as f64 * self.groups_per_element).ceil() as u64);
@@ -123,27 +121,40 @@ impl HierarchicalCosts {
             + exact
             + n * (size_of::<PatchGeom>() as u64 + 12)
             + c.nodes * 4;
-        // Sweeps: links, the rows the allocator kept, per-element arrays (area, normal, centroid, albedo, patch, element
-        // node, emission and albedo in the state's channels, change sums, live-bin mask and
-        // start, RGB radiance of the result and of the returned state), groups and their
-        // per-sweep sums, live-bin masks, radiance (two copies and the returned state) and
-        // antiradiance slots (two copies and the returned state), link intensities, solution.
+        // Sweeps: what the model holds (links, the rows the allocator kept, per-element arrays:
+        // area, normal, centroid, albedo, patch, element node, live-bin mask and start; groups,
+        // live-bin masks, solution) and the solve's state ([`HierarchicalCosts::state_bytes`]).
         let links = c.cluster_links * link + c.nodes * (4 + 16) + exact + n * 4;
-        let elements = n * (88 + 16 * ch + 24 + 8 * words + 4 + 48);
-        // Per group: normal, area, back flag, parent, child-parent pair; per sweep its sums of B
-        // (front and back faces) and of every bin.
-        let group = groups * (48 + 8 * ch * (2 + nb)) + n * 4;
-        let state = slots * 4 * ch * 3 + n * 8 * ch * 2;
-        let sweeps = tree
+        let elements = n * (88 + 24 + 8 * words + 4);
+        let group = groups * 48 + n * 4;
+        let held = tree
             + links
             + rows
             + elements
             + group
             + c.nodes * words * 8
-            + state
-            + c.cluster_links * 4 * ch
             + c.patches * SOLUTION_BYTES_PER_PATCH;
-        refine.max(sweeps)
+        refine.max(held + self.state_bytes(c))
+    }
+
+    /// The part of [`HierarchicalCosts::bytes`] that a solve allocates when it starts and frees
+    /// when it ends (what the exact direct light, computed before, does not share the memory
+    /// with): per element its emission and albedo in the state's channels, change sums and RGB
+    /// radiance of the result and of the returned state; per group its per-sweep sums of B
+    /// (front and back faces) and of every bin; radiance (two copies and the returned state) and
+    /// antiradiance slots (two copies and the returned state); link intensities.
+    pub fn state_bytes(&self, c: &ModelCounts) -> u64 {
+        let (nb, ch) = (self.bins, self.channels);
+        let n = c.elements;
+        let slots = c.slots.unwrap_or(n.saturating_mul(nb.div_ceil(2)));
+        let groups = c
+            .groups
+            .unwrap_or((n as f64 * self.groups_per_element).ceil() as u64);
+        n * (16 * ch + 48)
+            + groups * 8 * ch * (2 + nb)
+            + slots * 4 * ch * 3
+            + n * 8 * ch * 2
+            + c.cluster_links * 4 * ch
     }
 
     /// Bytes of the tree alone for `patches` patches (before any link: the nodes of a binary

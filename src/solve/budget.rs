@@ -9,13 +9,17 @@
 //!   finished model will hold ([`HierarchicalCosts::bytes`]) exceeds the budget (checked per
 //!   round and every [`CHECK_EVERY`] node pairs of each parallel task); the exact couplings are
 //!   estimated from the exact pair count before they are computed and counted while they are;
-//!   the per-sweep state from elements x stored bins once the live bins are known;
+//!   the per-sweep state from elements x stored bins once the live bins are known (until the
+//!   links are known, the sender groups per element are those of the tree before refinement);
 //! - the pair cache and the Anderson history, which only buy speed, get what is left;
-//! - the exact direct light ([`direct_light_bytes`]) is skipped when it does not fit;
+//! - the exact direct light ([`direct_light_bytes`]) is skipped when it does not fit beside the
+//!   model without the solve's state ([`HierarchicalCosts::state_bytes`]), which is allocated
+//!   once the direct light is freed: the estimate counts the larger of the two;
 //! - the dense solver ([`dense_bytes`]) refuses with [`crate::Error::Memory`] when it does not fit.
 //!
 //! When the hierarchical model does not fit, [`Prepared::new`](crate::solve::hierarchical::Prepared::new)
-//! coarsens it step by step: the pair cache off first, then epsilon doubled up to
+//! coarsens it step by step, each step refining the links again on the same tree (its splits
+//! undone): the pair cache off first, then epsilon doubled up to
 //! [`MAX_COARSE_EPSILON`], then the split depth lowered by two down to 0, then two bins per side
 //! fewer down to [`MIN_COARSE_BINS`] ([`coarser`]).
 //! When even the coarsest model does not fit, the solve ends with [`crate::Error::Memory`] before the

@@ -136,7 +136,7 @@ pub fn solve_hierarchical_direct(
         drop(direct);
         return Ok(skip(prepared, None));
     }
-    prepared.note_memory(bytes, None);
+    prepared.note_direct_light(bytes, receivers.len() as u64);
     let mut source = direct.reflected(&receivers, progress);
     // Only each receiver's patch and area are needed from here on (the receivers' corners
     // would take 112 MB through the sweeps of a 1M-triangle scene).

@@ -93,6 +93,9 @@ pub struct Prepared {
     pub options: SolverOptions,
     /// The memory budget of the solves.
     budget: Budget,
+    /// The part of the estimate a solve allocates when it starts and frees when it ends
+    /// ([`crate::solve::budget::HierarchicalCosts::state_bytes`] and the fields' sums).
+    state_bytes: u64,
     /// What the memory budget did: limit, estimate, what was coarsened.
     memory: MemoryStats,
     /// Build timings.
@@ -242,9 +245,18 @@ impl Prepared {
         &self.memory
     }
 
-    /// Bytes the memory limit leaves beside the model's estimate (for the exact direct light).
+    /// Bytes the memory limit leaves for the exact direct light: beside the model's estimate
+    /// without the solve's state, which is allocated after the direct light is freed.
     pub(crate) fn spare_bytes(&self) -> u64 {
-        self.budget.spare(self.memory.estimate_bytes)
+        (self.budget).spare(self.memory.estimate_bytes.saturating_sub(self.state_bytes))
+    }
+
+    /// Counts the exact direct light, estimated at `bytes` ([`crate::solve::budget::direct_light_bytes`]),
+    /// in the model's estimate: the peak is the larger of the model with the direct light and
+    /// the model with the solve's state and the direct light's result (`faces` x 24 bytes),
+    /// which lives through the sweeps.
+    pub(crate) fn note_direct_light(&mut self, bytes: u64, faces: u64) {
+        self.memory.estimate_bytes += bytes.saturating_sub(self.state_bytes).max(faces * 24);
     }
 
     /// Counts `bytes` more in the model's estimate and, when something was left out to fit,

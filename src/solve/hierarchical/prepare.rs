@@ -195,6 +195,7 @@ impl Prepared {
             bins,
             options: options.clone(),
             budget: link_budget.budget,
+            state_bytes: 0,
             memory: MemoryStats::default(),
             timings: HierarchyTimings {
                 tree: (t1 - t0).as_secs_f64(),
@@ -316,6 +317,8 @@ impl Prepared {
             return Err(OverBudget { estimate });
         }
         self.memory.estimate_bytes = estimate;
+        self.state_bytes = costs.state_bytes(&counts)
+            + (self.fields).sweep_bytes(link_budget.costs.channels() as usize);
         if cache_dropped {
             self.memory.coarsened.push("pair cache off".into());
         }
