@@ -11,6 +11,8 @@ pub const LIGHT_SPLIT_RATIO: f64 = 0.5;
 /// block light: built once and kept by the attempts of [`Prepared::new`] (each undoes the
 /// splits of the one before, [`ClusterTree::unsplit`]), since coarsening changes neither.
 pub(super) struct BaseTree {
+    /// The tree, marked with the sides that block; an attempt takes it and hands it back when
+    /// it does not fit.
     pub(super) tree: ClusterTree,
     /// Node count before any split.
     nodes: usize,
@@ -23,6 +25,8 @@ pub(super) struct BaseTree {
 }
 
 impl BaseTree {
+    /// The tree of `patches` and the sides of each patch that block light under `options`
+    /// ([`model::Backs::of`]).
     pub(super) fn new(patches: &Patches, options: &SolverOptions) -> BaseTree {
         let t0 = Instant::now();
         let mut tree = ClusterTree::build(patches);
