@@ -21,6 +21,10 @@ struct Start<const C: usize> {
     same_source_len: bool,
 }
 
+/// The state two sweeps back (radiance, back faces' radiance, antiradiance slots), for the
+/// two-sweep extrapolation.
+type TwoBack<const C: usize> = (Vec<[f64; C]>, Vec<[f64; C]>, Vec<[f32; C]>);
+
 /// The per-sweep sums of the senders and the links' intensities, kept between sweeps.
 struct Scratch<const C: usize> {
     group_b: Vec<[f64; C]>,
@@ -127,11 +131,18 @@ impl Prepared {
             (going_on, state_len_of::<C>(n + backs, slots)),
             (&mut convergence, &mut guard, &mut stats),
         );
-        let (mut anderson, memory) = self.accelerate::<C>(
+        let (mut anderson, mut memory) = self.accelerate::<C>(
             kept_anderson,
             going_on,
             rho_max,
             (&mut stats, &mut convergence),
+        );
+        let mut two_back = self.two_sweep_copy(
+            anderson.is_none(),
+            &mut memory,
+            &radiance,
+            &radiance_back,
+            &anti,
         );
         let (mut x_flat, mut g_flat) = (Vec::new(), Vec::new());
         let mut scratch = Scratch::new(self, std::mem::take(&mut intensity));
@@ -183,9 +194,16 @@ impl Prepared {
                 (&guard, anderson.as_mut(), &mut convergence),
                 (&mut radiance, &mut radiance_back, &mut anti),
                 (&next_radiance, &next_radiance_back, &next_anti),
+                two_back.as_ref(),
                 (&mut x_flat, &mut g_flat),
             ) {
                 stats.extrapolations += 1;
+            }
+            // The state before this sweep's: two sweeps back from the next one.
+            if let Some((b, b_back, a)) = two_back.as_mut() {
+                b.copy_from_slice(&next_radiance);
+                b_back.copy_from_slice(&next_radiance_back);
+                a.copy_from_slice(&next_anti);
             }
             if out_of_time(deadline, sweep_start) {
                 break;
@@ -217,6 +235,7 @@ impl Prepared {
             &mut Vec<[f32; C]>,
         ),
         (next_radiance, next_radiance_back, next_anti): (&[[f64; C]], &[[f64; C]], &[[f32; C]]),
+        two_back: Option<&TwoBack<C>>,
         flat: (&mut Vec<f64>, &mut Vec<f64>),
     ) -> bool {
         damp_if_damped(guard, (radiance, next_radiance), (anti, next_anti));
@@ -228,8 +247,29 @@ impl Prepared {
             convergence,
             (radiance, radiance_back, anti),
             (next_radiance, next_radiance_back, next_anti),
+            two_back,
             flat,
         )
+    }
+
+    /// A copy of the state for the two-sweep extrapolation
+    /// ([`Convergence::two_sweep_factor`]) when the sweeps are not mixed by Anderson
+    /// (`plain`) and the copy fits what the memory limit leaves (it is then counted in
+    /// `memory`'s estimate).
+    fn two_sweep_copy<const C: usize>(
+        &self,
+        plain: bool,
+        memory: &mut MemoryStats,
+        radiance: &[[f64; C]],
+        radiance_back: &[[f64; C]],
+        anti: &[[f32; C]],
+    ) -> Option<TwoBack<C>> {
+        let bytes = ((radiance.len() + radiance_back.len()) * 8 * C + anti.len() * 4 * C) as u64;
+        if !plain || bytes > self.budget.spare(memory.estimate_bytes) {
+            return None;
+        }
+        memory.estimate_bytes += bytes;
+        Some((radiance.to_vec(), radiance_back.to_vec(), anti.to_vec()))
     }
 
     /// The state the next sweep starts from, after the sweep from `(radiance, ..)` gave
@@ -246,6 +286,7 @@ impl Prepared {
             &mut Vec<[f32; C]>,
         ),
         (next_radiance, next_radiance_back, next_anti): (&[[f64; C]], &[[f64; C]], &[[f32; C]]),
+        two_back: Option<&TwoBack<C>>,
         (x_flat, g_flat): (&mut Vec<f64>, &mut Vec<f64>),
     ) -> bool {
         match anderson {
@@ -263,6 +304,15 @@ impl Prepared {
                     extrapolate(radiance_back, next_radiance_back, k);
                     extrapolate(anti, next_anti, k);
                     return true;
+                }
+                // Else over the last two sweeps, when their contraction has settled.
+                if let Some((b, b_back, a)) = two_back {
+                    if let Some(k) = convergence.two_sweep_factor() {
+                        extrapolate(radiance, b, k);
+                        extrapolate(radiance_back, b_back, k);
+                        extrapolate(anti, a, k);
+                        return true;
+                    }
                 }
             }
         }
