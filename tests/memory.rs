@@ -97,23 +97,29 @@ fn a_small_memory_limit_coarsens_with_a_warning() {
     let cornell = cornell_path();
     let tmp = tempfile::tempdir().unwrap();
     let (csv, json) = (tmp.path().join("out.csv"), tmp.path().join("out.json"));
-    // Measured: the accurate preset on these 956 patches is estimated at about 70 MB, the
-    // coarsest model at about 7 MB; 48 MB leaves room for about 25 MB beside the process.
-    let o = run(&[
+    let asked = [
         "solve",
         s(&cornell),
         "--max-edge",
         "100",
         "--preset",
         "accurate",
-        "--memory-limit",
-        "48M",
-        "--triangles",
-        s(&csv),
-        "--report",
-        s(&json),
-        "--quiet",
-    ]);
+    ];
+    // Measured: the accurate preset on these 956 patches is estimated at about 70 MB, the
+    // coarsest model at about 7 MB; 48 MB leaves room for about 25 MB beside the process.
+    let o = run(&[
+        &asked[..],
+        &[
+            "--memory-limit",
+            "48M",
+            "--triangles",
+            s(&csv),
+            "--report",
+            s(&json),
+            "--quiet",
+        ],
+    ]
+    .concat());
     let err = stderr(&o);
     assert!(o.status.success(), "{err}");
     let warnings: Vec<&str> = err
@@ -161,22 +167,20 @@ fn a_small_memory_limit_coarsens_with_a_warning() {
         m["bins"].to_string(),
     );
     let o = run(&[
-        "solve",
-        s(&cornell),
-        "--max-edge",
-        "100",
-        "--preset",
-        "accurate",
-        "--epsilon",
-        &epsilon,
-        "--split-depth",
-        &split_depth,
-        "--bins",
-        &bins,
-        "--report",
-        s(&json_direct),
-        "--quiet",
-    ]);
+        &asked[..],
+        &[
+            "--epsilon",
+            &epsilon,
+            "--split-depth",
+            &split_depth,
+            "--bins",
+            &bins,
+            "--report",
+            s(&json_direct),
+            "--quiet",
+        ],
+    ]
+    .concat());
     assert!(o.status.success(), "{}", stderr(&o));
     let direct = report(&json_direct);
     for key in ["elements", "links"] {

@@ -74,6 +74,12 @@ pub struct Node {
 }
 
 impl Node {
+    /// The unit normal of the node's plane, +Z for a node that is not flat (a leaf triangle
+    /// always is).
+    pub fn plane_normal(&self) -> DVec3 {
+        self.plane.map_or(DVec3::Z, |p| p.0)
+    }
+
     /// True for leaf triangles.
     pub fn is_leaf(&self) -> bool {
         self.child_count == 0

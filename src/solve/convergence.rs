@@ -103,16 +103,20 @@ impl Convergence {
         if !(settled && q > 0.05 && q < MAX_CONTRACTION) {
             return None;
         }
-        self.since_extrapolation = 0;
-        // The change right after a jump is not a contraction ratio of the plain iteration.
-        self.previous = None;
-        self.q_at_jump = Some(q);
-        self.ratios.clear();
-        Some(q / (1.0 - q))
+        Some(self.jump(q, q))
     }
-}
 
-impl Convergence {
+    /// Records a jump by `q / (1 - q)` of an iteration contracting by `q_sweep` per sweep, and
+    /// returns that factor: the ratios start again, and the sweep after the jump estimates its
+    /// error with `q_sweep` (its change is not a contraction ratio of the plain iteration).
+    fn jump(&mut self, q: f64, q_sweep: f64) -> f64 {
+        self.since_extrapolation = 0;
+        self.previous = None;
+        self.q_at_jump = Some(q_sweep);
+        self.ratios.clear();
+        q / (1.0 - q)
+    }
+
     /// The factor `q2 / (1 - q2)` by which to extrapolate the change over the last two sweeps
     /// (`x += k (x_k - x_(k-2))`) when the two-sweep contraction has settled: the products of
     /// the last four ratios' consecutive pairs agree within [`TWO_SWEEP_SETTLED`] and `q2` lies in (0.05^2,
@@ -138,11 +142,7 @@ impl Convergence {
         if !(settled && q2 > 0.0025 && q2 < MAX_CONTRACTION) {
             return None;
         }
-        self.since_extrapolation = 0;
-        self.previous = None;
-        self.q_at_jump = Some(q2.sqrt());
-        self.ratios.clear();
-        Some(q2 / (1.0 - q2))
+        Some(self.jump(q2, q2.sqrt()))
     }
 }
 

@@ -217,9 +217,7 @@ impl SenderGroups {
         tree.finalize();
         let leaves = || tree.elements.iter().map(|&i| &tree.nodes[i as usize]);
         let area: Vec<f64> = leaves().map(|n| n.area).collect();
-        let normal: Vec<DVec3> = leaves()
-            .map(|n| n.plane.map(|p| p.0).unwrap_or(DVec3::Z))
-            .collect();
+        let normal: Vec<DVec3> = leaves().map(|n| n.plane_normal()).collect();
         let back: Vec<bool> = leaves().map(|n| n.blocks_back).collect();
         let groups = SenderGroups::build(tree, &area, &normal, &back);
         groups.normal.len() as f64 / area.len().max(1) as f64

@@ -25,6 +25,18 @@ struct Start<const C: usize> {
 /// two-sweep extrapolation.
 type TwoBack<const C: usize> = (Vec<[f64; C]>, Vec<[f64; C]>, Vec<[f32; C]>);
 
+/// `x += k (x - from)` over the whole state: radiance, back faces' radiance, antiradiance.
+#[allow(clippy::type_complexity)]
+fn extrapolate_state<const C: usize>(
+    (radiance, radiance_back, anti): (&mut [[f64; C]], &mut [[f64; C]], &mut [[f32; C]]),
+    (from_radiance, from_back, from_anti): (&[[f64; C]], &[[f64; C]], &[[f32; C]]),
+    k: f64,
+) {
+    extrapolate(radiance, from_radiance, k);
+    extrapolate(radiance_back, from_back, k);
+    extrapolate(anti, from_anti, k);
+}
+
 /// The per-sweep sums of the senders and the links' intensities, kept between sweeps.
 struct Scratch<const C: usize> {
     group_b: Vec<[f64; C]>,
@@ -199,11 +211,12 @@ impl Prepared {
             ) {
                 stats.extrapolations += 1;
             }
-            // The state before this sweep's: two sweeps back from the next one.
+            // The state before this sweep's is two sweeps back from the next one; the next sweep
+            // writes every entry of `next_*`, so the buffers trade places instead of copying.
             if let Some((b, b_back, a)) = two_back.as_mut() {
-                b.copy_from_slice(&next_radiance);
-                b_back.copy_from_slice(&next_radiance_back);
-                a.copy_from_slice(&next_anti);
+                std::mem::swap(b, &mut next_radiance);
+                std::mem::swap(b_back, &mut next_radiance_back);
+                std::mem::swap(a, &mut next_anti);
             }
             if out_of_time(deadline, sweep_start) {
                 break;
@@ -299,18 +312,19 @@ impl Prepared {
             }
             // Else, once the sweeps contract at a steady ratio, jump over the geometric tail.
             None => {
+                let state = (
+                    radiance.as_mut_slice(),
+                    radiance_back.as_mut_slice(),
+                    anti.as_mut_slice(),
+                );
                 if let Some(k) = convergence.extrapolation_factor() {
-                    extrapolate(radiance, next_radiance, k);
-                    extrapolate(radiance_back, next_radiance_back, k);
-                    extrapolate(anti, next_anti, k);
+                    extrapolate_state(state, (next_radiance, next_radiance_back, next_anti), k);
                     return true;
                 }
                 // Else over the last two sweeps, when their contraction has settled.
                 if let Some((b, b_back, a)) = two_back {
                     if let Some(k) = convergence.two_sweep_factor() {
-                        extrapolate(radiance, b, k);
-                        extrapolate(radiance_back, b_back, k);
-                        extrapolate(anti, a, k);
+                        extrapolate_state(state, (b, b_back, a), k);
                         return true;
                     }
                 }

@@ -22,6 +22,10 @@ pub(super) struct BaseTree {
     two_sided: Vec<bool>,
     /// Seconds the tree and the sides took.
     seconds: f64,
+    /// The sender groups per element of the tree an attempt refines, by its node count once
+    /// split toward the point lights ([`SenderGroups::share`]): attempts whose light splits give
+    /// the same tree (every attempt, in a scene without point lights) count them once.
+    share: Option<(usize, f64)>,
 }
 
 impl BaseTree {
@@ -42,6 +46,7 @@ impl BaseTree {
             back_blocking,
             two_sided,
             seconds: t0.elapsed().as_secs_f64(),
+            share: None,
         }
     }
 }
@@ -155,8 +160,16 @@ impl Prepared {
             params.min_radius,
         );
         // The budget assumes the sender groups per element of the tree as it stands.
+        let share = match base.share {
+            Some((nodes, share)) if nodes == tree.nodes.len() => share,
+            _ => {
+                let share = SenderGroups::share(&mut tree);
+                base.share = Some((tree.nodes.len(), share));
+                share
+            }
+        };
         let link_budget = &LinkBudget {
-            costs: (link_budget.costs).with_group_share(SenderGroups::share(&mut tree)),
+            costs: (link_budget.costs).with_group_share(share),
             ..*link_budget
         };
         let t1 = Instant::now();
@@ -237,8 +250,7 @@ impl Prepared {
         for &node in &self.tree.elements {
             let n = &self.tree.nodes[node as usize];
             self.elem_area.push(n.area);
-            self.elem_normal
-                .push(n.plane.map(|p| p.0).unwrap_or(DVec3::Z));
+            self.elem_normal.push(n.plane_normal());
             self.elem_center.push(n.centroid);
             self.elem_albedo.push(patches.albedo[n.patch as usize]);
             self.elem_patch.push(n.patch);
