@@ -16,7 +16,7 @@ pub mod texture;
 pub mod variants;
 pub mod write_obj;
 
-use std::collections::{hash_map, HashMap};
+use rayon::prelude::*;
 use std::path::PathBuf;
 
 use glam::DVec3;
@@ -407,66 +407,117 @@ impl Scene {
     /// into the earlier triangle made two-sided, whose back face is the twin
     /// ([`crate::mesh::Patches::back_twin`]).
     pub fn back_to_back_twins(&self) -> Vec<Option<u32>> {
-        let key = |p: DVec3| p.to_array().map(|x| (x + 0.0).to_bits());
-        let canonical = |k: [[u64; 3]; 3]| {
-            let start = (0..3).min_by_key(|&i| k[i]).unwrap_or(0);
-            [k[start], k[(start + 1) % 3], k[(start + 2) % 3]]
-        };
         let duplicates = self.duplicates();
-        let mut first: HashMap<[[u64; 3]; 3], u32> = HashMap::with_capacity(self.len());
-        let mut twin = vec![None; self.len()];
-        let mut paired = vec![false; self.len()];
-        for t in 0..self.len() {
-            if self.is_degenerate(t) || duplicates[t].is_some() {
-                continue;
-            }
-            let [a, b, c] = self.corners(t).map(key);
-            let same =
-                |u: usize| self.albedo[u] == self.albedo[t] && self.emission[u] == self.emission[t];
-            match first.get(&canonical([a, c, b])) {
-                Some(&u) if !paired[u as usize] && same(u as usize) => {
-                    twin[t] = Some(u);
-                    paired[u as usize] = true;
-                }
-                _ => {
-                    first.entry(canonical([a, b, c])).or_insert(t as u32);
-                }
-            }
-        }
-        twin
-    }
-
-    /// For every triangle, the first earlier triangle it duplicates, if any: same three corner
-    /// positions (bit for bit) in the same cyclic order, i.e. the same surface facing the same
-    /// way. Degenerate triangles are never duplicates.
-    ///
-    /// Duplicates must take part in transport only once: two coincident one-sided surfaces
-    /// would reflect the light they receive twice and, in front-only antiradiance, both send
-    /// the antiradiance that cancels the light behind them, which then cancels it twice (a
-    /// doubled plate made the shadow under it negative). Back-to-back copies (reversed corner
-    /// order, a thin two-sided wall) are not duplicates: see [`Scene::back_to_back_twins`].
-    pub fn duplicates(&self) -> Vec<Option<u32>> {
-        // `+ 0.0` turns -0.0 into 0.0, so that equal coordinates get equal keys.
-        let key = |p: DVec3| p.to_array().map(|x| (x + 0.0).to_bits());
-        let mut first: HashMap<[[u64; 3]; 3], u32> = HashMap::with_capacity(self.len());
+        // Every triangle that is neither degenerate nor a duplicate has a corner sequence of its
+        // own: the later of a pair whose sequences are each other's reverse is the twin of the
+        // earlier (each sequence being unique, "already paired" cannot happen).
+        let keyed = self.sorted_corner_keys(|t| duplicates[t].is_none());
         (0..self.len())
+            .into_par_iter()
             .map(|t| {
-                if self.is_degenerate(t) {
+                if self.is_degenerate(t) || duplicates[t].is_some() {
                     return None;
                 }
-                let k = self.corners(t).map(key);
-                // The rotation that starts at the smallest corner: the same for every cyclic
-                // order of the same corners, different for the reversed order.
-                let start = (0..3).min_by_key(|&i| k[i]).unwrap_or(0);
-                let canonical = [k[start], k[(start + 1) % 3], k[(start + 2) % 3]];
-                match first.entry(canonical) {
-                    hash_map::Entry::Occupied(e) => Some(*e.get()),
-                    hash_map::Entry::Vacant(e) => {
-                        e.insert(t as u32);
-                        None
-                    }
-                }
+                let [a, b, c] = self.corners(t).map(corner_key);
+                let reversed = canonical_rotation([a, c, b]);
+                let i = keyed.partition_point(|(k, _)| *k < reversed);
+                let &(k, u) = keyed.get(i)?;
+                let same = self.albedo[u as usize] == self.albedo[t]
+                    && self.emission[u as usize] == self.emission[t];
+                (k == reversed && (u as usize) < t && same).then_some(u)
             })
             .collect()
+    }
+
+    pub fn duplicates(&self) -> Vec<Option<u32>> {
+        let keyed = self.sorted_corner_keys(|_| true);
+        let mut first = vec![None; self.len()];
+        // Runs of equal keys are sorted by index: the first of a run is the earliest triangle.
+        for run in keyed.chunk_by(|a, b| a.0 == b.0) {
+            for &(_, t) in &run[1..] {
+                first[t as usize] = Some(run[0].1);
+            }
+        }
+        first
+    }
+
+    /// The non-degenerate triangles that `keep`, as (canonical corner key, index) sorted by key
+    /// and then index: the key is the three corners' bits in cyclic order from the smallest
+    /// (the same for every rotation of the same corners, different for the reversed order).
+    fn sorted_corner_keys(&self, keep: impl Fn(usize) -> bool + Sync) -> Vec<(CornerKey, u32)> {
+        let mut keyed: Vec<(CornerKey, u32)> = (0..self.len())
+            .into_par_iter()
+            .filter(|&t| keep(t) && !self.is_degenerate(t))
+            .map(|t| {
+                (
+                    canonical_rotation(self.corners(t).map(corner_key)),
+                    t as u32,
+                )
+            })
+            .collect();
+        keyed.par_sort_unstable();
+        keyed
+    }
+}
+
+/// A triangle's corners as bits, in a cyclic order ([`canonical_rotation`]).
+type CornerKey = [[u64; 3]; 3];
+
+/// A corner's coordinates as bits; `+ 0.0` turns -0.0 into 0.0, so that equal coordinates get
+/// equal keys.
+fn corner_key(p: DVec3) -> [u64; 3] {
+    p.to_array().map(|x| (x + 0.0).to_bits())
+}
+
+/// The rotation of `k` that starts at its smallest corner: the same for every cyclic order of
+/// the same corners, different for the reversed order.
+fn canonical_rotation(k: CornerKey) -> CornerKey {
+    let start = (0..3).min_by_key(|&i| k[i]).unwrap_or(0);
+    [k[start], k[(start + 1) % 3], k[(start + 2) % 3]]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A scene of the given corner triples over four points, albedo 0.5 unless listed in `dark`.
+    fn scene_of(triangles: &[[u32; 3]], dark: &[usize]) -> Scene {
+        let n = triangles.len();
+        Scene {
+            positions: vec![DVec3::ZERO, DVec3::X, DVec3::Y, DVec3::new(1.0, 1.0, -0.0)],
+            triangles: triangles.to_vec(),
+            albedo: (0..n)
+                .map(|t| [if dark.contains(&t) { 0.1 } else { 0.5 }; 3])
+                .collect(),
+            emission: vec![[0.0; 3]; n],
+            ..Scene::default()
+        }
+    }
+
+    #[test]
+    fn duplicates_and_twins_follow_the_corner_order() {
+        // 0: A; 1: A rotated (a duplicate); 2: B; 3: B reversed, darker (no twin);
+        // 4: A reversed (the twin of 0); 5: B reversed and rotated (a duplicate of 3);
+        // 6: degenerate (a point repeated).
+        let scene = scene_of(
+            &[
+                [0, 1, 2],
+                [1, 2, 0],
+                [1, 3, 2],
+                [1, 2, 3],
+                [0, 2, 1],
+                [2, 3, 1],
+                [0, 0, 1],
+            ],
+            &[3, 5],
+        );
+        assert_eq!(
+            scene.duplicates(),
+            [None, Some(0), None, None, None, Some(3), None]
+        );
+        assert_eq!(
+            scene.back_to_back_twins(),
+            [None, None, None, None, Some(0), None, None]
+        );
     }
 }

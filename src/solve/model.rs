@@ -138,6 +138,15 @@ fn exposed_where(
                         fronts += 1;
                     }
                 }
+                // Stop once the remaining rays cannot change the answer: the fronts already
+                // make the share of every ray, or would miss it even if all the rest met fronts.
+                let rest = (rays - k - 1) as f64;
+                if fronts > 0 && fronts as f64 >= EXPOSED_SHARE * rays as f64 {
+                    return true;
+                }
+                if (fronts as f64 + rest) < EXPOSED_SHARE * (hits as f64 + rest) {
+                    return false;
+                }
             }
             fronts > 0 && fronts as f64 >= EXPOSED_SHARE * hits as f64
         })
