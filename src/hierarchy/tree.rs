@@ -145,6 +145,36 @@ fn leaf_node(corners: Tri, patch: u32, parent: u32, split_depth: u8) -> Node {
     }
 }
 
+/// A node of the layout of [`ClusterTree::build_nodes`] before it is filled in: a leaf's by
+/// its leaf, a cluster's by [`ClusterTree::refit_all`] and [`ClusterTree::compute_cones`]
+/// (only `corners`, those of the first patch of its parent's range right after its split,
+/// stay).
+fn placeholder(corners: Tri, parent: u32) -> Node {
+    Node {
+        center: DVec3::ZERO,
+        radius: 0.0,
+        area: 0.0,
+        centroid: DVec3::ZERO,
+        mean_square: 0.0,
+        plane: None,
+        bounds: (DVec3::ZERO, DVec3::ZERO),
+        first_child: NONE,
+        child_count: 0,
+        parent,
+        patch: NONE,
+        split_depth: 0,
+        corners,
+        piece_radius: 0.0,
+        elements: (0, 0),
+        cone_axis: DVec3::ZERO,
+        cone_cos: 1.0,
+        blocks_back: false,
+        emits: false,
+        two_sided: false,
+        height: 0.0,
+    }
+}
+
 /// The radius of a leaf's bounding sphere: the largest distance of a corner from the centroid.
 fn triangle_radius(corners: &Tri) -> f64 {
     let center = geometry::centroid(corners);
@@ -176,8 +206,45 @@ pub fn signed_extent(node: &Node, n: DVec3, d: f64) -> (f64, f64) {
 const SPLIT_BINS: usize = 16;
 
 /// The bin (0..[`SPLIT_BINS`]) of grid position `g` in a range starting at `lo`, `span` wide.
+/// (Grid positions are unit-frame coordinates over [`geometry::SCENE_EPS`], at most 1e5 or so
+/// apart, so the product cannot overflow.)
 fn split_bin(g: i64, lo: i64, span: i64) -> usize {
-    ((g - lo) as i128 * SPLIT_BINS as i128 / span as i128) as usize
+    ((g - lo) * SPLIT_BINS as i64 / span) as usize
+}
+
+/// What the splits of [`split_range`] read of every patch, computed once.
+struct SplitInput<'a> {
+    corners: &'a [Tri],
+    /// The centroid on the grid of [`geometry::SCENE_EPS`], per axis.
+    grid: Vec<[i64; 3]>,
+    /// The area.
+    area: Vec<f64>,
+    /// The bounding box (low and high corner).
+    bounds: Vec<(DVec3, DVec3)>,
+}
+
+impl<'a> SplitInput<'a> {
+    fn new(corners: &'a [Tri]) -> SplitInput<'a> {
+        let grid = corners
+            .par_iter()
+            .map(|c| {
+                geometry::centroid(c)
+                    .to_array()
+                    .map(|x| (x / geometry::SCENE_EPS).round() as i64)
+            })
+            .collect();
+        let area = corners.par_iter().map(geometry::area).collect();
+        let bounds = corners
+            .par_iter()
+            .map(|c| (c[0].min(c[1]).min(c[2]), c[0].max(c[1]).max(c[2])))
+            .collect();
+        SplitInput {
+            corners,
+            grid,
+            area,
+            bounds,
+        }
+    }
 }
 
 /// Ranges at least this long are split on their own thread ([`split_range`]).
@@ -198,20 +265,20 @@ enum Shape {
 /// documents, reordering it (each part after its parent's split, first part first), and
 /// returns the shape of the splits. Parts of at least [`PARALLEL_SPLIT`] patches are split in
 /// parallel; the result does not depend on it.
-fn split_range(range: &mut [u32], centroid: &[DVec3], corners: &[Tri]) -> Shape {
+fn split_range(range: &mut [u32], input: &SplitInput) -> Shape {
+    let corners = input.corners;
     if range.len() <= 1 {
         return Shape::Leaf;
     }
     let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
     for &p in range.iter() {
-        for v in corners[p as usize] {
-            lo = lo.min(v);
-            hi = hi.max(v);
-        }
+        let (p_lo, p_hi) = input.bounds[p as usize];
+        lo = lo.min(p_lo);
+        hi = hi.max(p_hi);
     }
     let extent = (hi - lo).length();
     // The largest triangle (first by patch index among equals).
-    let area = |p: u32| geometry::area(&corners[p as usize]);
+    let area = |p: u32| input.area[p as usize];
     let (big, big_area) = range.iter().enumerate().fold((0, -1.0), |best, (k, &p)| {
         let a = area(p);
         if a > best.1 || (a == best.1 && p < range[best.0]) {
@@ -228,21 +295,15 @@ fn split_range(range: &mut [u32], centroid: &[DVec3], corners: &[Tri]) -> Shape 
         range.swap(0, big);
         1
     } else {
-        sah_split(range, centroid, corners)
+        sah_split(range, input)
     };
     let head = range[0];
     let parallel = range.len() >= PARALLEL_SPLIT;
     let (first, second) = range.split_at_mut(mid);
     let parts = if parallel {
-        rayon::join(
-            || split_range(first, centroid, corners),
-            || split_range(second, centroid, corners),
-        )
+        rayon::join(|| split_range(first, input), || split_range(second, input))
     } else {
-        (
-            split_range(first, centroid, corners),
-            split_range(second, centroid, corners),
-        )
+        (split_range(first, input), split_range(second, input))
     };
     Shape::Split {
         mid,
@@ -262,40 +323,43 @@ fn split_range(range: &mut [u32], centroid: &[DVec3], corners: &[Tri]) -> Shape 
 /// replace an earlier one (axes x, y, z, bins in order), so a 1e-6 jitter or a translation
 /// builds the same tree. When every centroid falls in one bin on every axis, the range is
 /// halved in order.
-fn sah_split(range: &mut [u32], centroid: &[DVec3], corners: &[Tri]) -> usize {
-    let grid =
-        |p: u32, axis: usize| (centroid[p as usize][axis] / geometry::SCENE_EPS).round() as i64;
+fn sah_split(range: &mut [u32], input: &SplitInput) -> usize {
+    let grid = |p: u32, axis: usize| input.grid[p as usize][axis];
     let area = |(lo, hi): (DVec3, DVec3)| {
         let e = (hi - lo).max(DVec3::ZERO);
         2.0 * (e.x * e.y + e.y * e.z + e.z * e.x)
     };
     let empty = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
-    let grow = |b: &mut (DVec3, DVec3), p: u32| {
-        for v in corners[p as usize] {
-            b.0 = b.0.min(v);
-            b.1 = b.1.max(v);
-        }
-    };
     let join = |a: (DVec3, DVec3), b: (DVec3, DVec3)| (a.0.min(b.0), a.1.max(b.1));
-    // (cost, axis, last bin of the first part, grid low, grid span)
-    let mut best: Option<(f64, usize, usize, i64, i64)> = None;
+    // The grid's range per axis, then every axis's bins in one pass over the range.
+    let (mut g_lo, mut g_hi) = ([i64::MAX; 3], [i64::MIN; 3]);
+    for &p in range.iter() {
+        let g = input.grid[p as usize];
+        for axis in 0..3 {
+            g_lo[axis] = g_lo[axis].min(g[axis]);
+            g_hi[axis] = g_hi[axis].max(g[axis]);
+        }
+    }
+    let span: [i64; 3] = std::array::from_fn(|axis| g_hi[axis] - g_lo[axis] + 1);
+    let mut count = [[0usize; SPLIT_BINS]; 3];
+    let mut boxes = [[empty; SPLIT_BINS]; 3];
+    for &p in range.iter() {
+        let (g, b) = (input.grid[p as usize], input.bounds[p as usize]);
+        for axis in 0..3 {
+            if span[axis] > 1 {
+                let k = split_bin(g[axis], g_lo[axis], span[axis]);
+                count[axis][k] += 1;
+                boxes[axis][k] = join(boxes[axis][k], b);
+            }
+        }
+    }
+    // (cost, axis, last bin of the first part)
+    let mut best: Option<(f64, usize, usize)> = None;
     for axis in 0..3 {
-        let (lo, hi) = range.iter().fold((i64::MAX, i64::MIN), |(lo, hi), &p| {
-            let g = grid(p, axis);
-            (lo.min(g), hi.max(g))
-        });
-        if hi == lo {
+        if span[axis] == 1 {
             continue;
         }
-        let span = hi - lo + 1;
-        let bin_of = |p: u32| split_bin(grid(p, axis), lo, span);
-        let mut count = [0usize; SPLIT_BINS];
-        let mut boxes = [empty; SPLIT_BINS];
-        for &p in range.iter() {
-            let k = bin_of(p);
-            count[k] += 1;
-            grow(&mut boxes[k], p);
-        }
+        let (count, boxes) = (&count[axis], &boxes[axis]);
         let mut right = [(0usize, empty); SPLIT_BINS];
         let mut acc = (0usize, empty);
         for k in (0..SPLIT_BINS).rev() {
@@ -311,13 +375,14 @@ fn sah_split(range: &mut [u32], centroid: &[DVec3], corners: &[Tri]) -> usize {
             }
             let cost = left.0 as f64 * area(left.1) + n_right as f64 * area(box_right);
             if best.is_none_or(|b| cost < b.0 * (1.0 - tolerances::SAH_IMPROVEMENT)) {
-                best = Some((cost, axis, k, lo, span));
+                best = Some((cost, axis, k));
             }
         }
     }
-    let Some((_, axis, last, lo, span)) = best else {
+    let Some((_, axis, last)) = best else {
         return range.len() / 2;
     };
+    let (lo, span) = (g_lo[axis], span[axis]);
     let (first, second): (Vec<u32>, Vec<u32>) = range
         .iter()
         .partition(|&&p| split_bin(grid(p, axis), lo, span) <= last);
@@ -375,13 +440,9 @@ impl ClusterTree {
     /// of mean leaf depth 19 or 15 for the same room, and 0.99M or 0.71M links.
     fn build_nodes(&mut self, patches: &Patches, mut active: Vec<u32>) {
         let corners = &patches.corners;
-        let centroid: Vec<DVec3> = (0..patches.len())
-            .into_par_iter()
-            .map(|p| geometry::centroid(&corners[p]))
-            .collect();
         let root_head = active[0];
         // 1. The splits, independent ranges in parallel: `active` reordered, and their shape.
-        let shape = split_range(&mut active, &centroid, corners);
+        let shape = split_range(&mut active, &SplitInput::new(corners));
         // 2. The leaves, in parallel.
         let leaves: Vec<Node> = active
             .par_iter()
@@ -391,6 +452,8 @@ impl ClusterTree {
         //    placeholders take the corners of the parent's first patch right after its split;
         //    `refit_all` fills in the clusters).
         self.nodes.clear();
+        // A binary tree over the leaves.
+        self.nodes.reserve_exact(2 * leaves.len() - 1);
         self.nodes
             .push(leaf_node(corners[root_head as usize], NONE, NONE, 0));
         // (node, first of its range, its shape)
@@ -406,8 +469,7 @@ impl ClusterTree {
             };
             let child = self.nodes.len() as u32;
             for _ in 0..2 {
-                let c = leaf_node(corners[*head as usize], NONE, node, 0);
-                self.nodes.push(c);
+                self.nodes.push(placeholder(corners[*head as usize], node));
             }
             let n = &mut self.nodes[node as usize];
             n.first_child = child;

@@ -6,6 +6,8 @@ use crate::error::{Error, Result, Warning, WarningKind};
 use crate::scene::mtllib;
 use crate::scene::*;
 use glam::DVec3;
+use rayon::prelude::*;
+use std::fmt::Write as _;
 use std::path::Path;
 
 /// Reads an OBJ file (and the MTL files it names) into a [`Scene`].
@@ -293,30 +295,117 @@ pub(crate) fn rest_after_keyword(line: &str) -> &str {
 /// Checks every `v` and `f` line of an OBJ file and reduces the file to what tobj needs, so tobj
 /// only ever sees well-formed input.
 pub(crate) fn scan_obj(path: &Path, text: &str) -> Result<ObjScan> {
-    let vertex_total = text
-        .lines()
-        .filter(|l| content(l).split_whitespace().next() == Some("v"))
-        .count();
-    let mut vertices_so_far = 0usize;
+    // Whole lines in chunks of about SCAN_CHUNK bytes, scanned in parallel: a first pass
+    // counts each chunk's lines and `v` lines (relative face indices count back from the
+    // vertices before them), the second checks and reduces each chunk; the pieces are joined
+    // in file order, and the first error in file order is the one reported.
+    let chunks = line_chunks(text, SCAN_CHUNK);
+    let counts: Vec<(usize, usize)> = chunks
+        .par_iter()
+        .map(|chunk| {
+            let lines = chunk.lines().count();
+            let vertices = chunk.lines().filter(|l| is_vertex_line(l)).count();
+            (lines, vertices)
+        })
+        .collect();
+    let vertex_total: usize = counts.iter().map(|c| c.1).sum();
+    let mut starts = Vec::with_capacity(chunks.len());
+    let (mut line0, mut vertex0) = (0usize, 0usize);
+    for &(lines, vertices) in &counts {
+        starts.push((line0, vertex0));
+        line0 += lines;
+        vertex0 += vertices;
+    }
+    let pieces: Vec<Result<ObjScan>> = chunks
+        .par_iter()
+        .zip(&starts)
+        .map(|(chunk, &(line0, vertex0))| scan_chunk(path, chunk, line0, vertex0, vertex_total))
+        .collect();
     let mut scan = ObjScan {
         mtllibs: Vec::new(),
         usemtls: Vec::new(),
         triangle_count: 0,
-        vertices: String::new(),
-        body: String::new(),
+        vertices: String::with_capacity(text.len() / 2),
+        body: String::with_capacity(text.len() / 2),
     };
-    for (i, raw) in text.lines().enumerate() {
-        let line_no = i + 1;
+    for piece in pieces {
+        let piece = piece?;
+        scan.mtllibs.extend(piece.mtllibs);
+        scan.usemtls.extend(piece.usemtls);
+        scan.triangle_count += piece.triangle_count;
+        scan.vertices.push_str(&piece.vertices);
+        scan.body.push_str(&piece.body);
+    }
+    if vertex_total == 0 || scan.triangle_count == 0 {
+        return Err(Error::Scene {
+            path: path.to_path_buf(),
+            message: "empty scene: no vertices or no faces".into(),
+        });
+    }
+    Ok(scan)
+}
+
+/// Bytes of OBJ text one task of [`scan_obj`] scans (whole lines).
+const SCAN_CHUNK: usize = 1 << 20;
+
+/// `text` cut into pieces of whole lines (each ending after a newline, the last one where the
+/// text ends), about `size` bytes each.
+fn line_chunks(text: &str, size: usize) -> Vec<&str> {
+    let mut chunks = Vec::new();
+    let mut rest = text;
+    while !rest.is_empty() {
+        let cut = if rest.len() <= size {
+            rest.len()
+        } else {
+            rest.as_bytes()[size..]
+                .iter()
+                .position(|&b| b == b'\n')
+                .map_or(rest.len(), |i| size + i + 1)
+        };
+        let (chunk, tail) = rest.split_at(cut);
+        chunks.push(chunk);
+        rest = tail;
+    }
+    chunks
+}
+
+/// True for a `v` line (a vertex position).
+fn is_vertex_line(raw: &str) -> bool {
+    content(raw).split_whitespace().next() == Some("v")
+}
+
+/// [`scan_obj`] of one chunk of whole lines, whose first line is the file's line `line0 + 1`
+/// and which follows `vertex0` of the file's `vertex_total` `v` lines.
+fn scan_chunk(
+    path: &Path,
+    chunk: &str,
+    line0: usize,
+    vertex0: usize,
+    vertex_total: usize,
+) -> Result<ObjScan> {
+    let mut vertices_so_far = vertex0;
+    let mut scan = ObjScan {
+        mtllibs: Vec::new(),
+        usemtls: Vec::new(),
+        triangle_count: 0,
+        vertices: String::with_capacity(chunk.len() / 2),
+        body: String::with_capacity(chunk.len() / 2),
+    };
+    let mut refs: Vec<&str> = Vec::new();
+    for (i, raw) in chunk.lines().enumerate() {
+        let line_no = line0 + i + 1;
         let line = content(raw);
         let mut words = line.split_whitespace();
         match words.next() {
             Some("v") => {
-                let nums: Vec<&str> = words.collect();
-                scan_vertex(path, line_no, &nums, &mut scan.vertices)?;
+                refs.clear();
+                refs.extend(words);
+                scan_vertex(path, line_no, &refs, &mut scan.vertices)?;
                 vertices_so_far += 1;
             }
             Some("f") => {
-                let refs: Vec<&str> = words.collect();
+                refs.clear();
+                refs.extend(words);
                 let counts = (vertices_so_far, vertex_total);
                 scan_face(path, line_no, &refs, counts, &mut scan.body)?;
                 scan.triangle_count += refs.len() - 2;
@@ -332,17 +421,13 @@ pub(crate) fn scan_obj(path: &Path, text: &str) -> Result<ObjScan> {
                 if name.is_empty() {
                     return Err(parse_err(path, line_no, "usemtl needs a material name"));
                 }
-                scan.body.push_str(&format!("usemtl {name}\n"));
+                scan.body.push_str("usemtl ");
+                scan.body.push_str(name);
+                scan.body.push('\n');
                 scan.usemtls.push((line_no, name.to_string()));
             }
             _ => {}
         }
-    }
-    if vertex_total == 0 || scan.triangle_count == 0 {
-        return Err(Error::Scene {
-            path: path.to_path_buf(),
-            message: "empty scene: no vertices or no faces".into(),
-        });
     }
     Ok(scan)
 }
@@ -398,9 +483,14 @@ fn scan_vertex(path: &Path, line_no: usize, nums: &[&str], vertices: &mut String
                 "vertex coordinate is not finite after dividing by w",
             ));
         }
-        vertices.push_str(&format!("v {:e} {:e} {:e}\n", p[0], p[1], p[2]));
+        // Writing to a String cannot fail.
+        let _ = writeln!(vertices, "v {:e} {:e} {:e}", p[0], p[1], p[2]);
     } else {
-        vertices.push_str(&format!("v {} {} {}\n", nums[0], nums[1], nums[2]));
+        for (k, w) in nums[..3].iter().enumerate() {
+            vertices.push_str(if k == 0 { "v " } else { " " });
+            vertices.push_str(w);
+        }
+        vertices.push('\n');
     }
     Ok(())
 }
@@ -450,7 +540,8 @@ fn scan_face(
                 ));
             }
         }
-        body.push_str(&format!(" {resolved}"));
+        // Writing to a String cannot fail.
+        let _ = write!(body, " {resolved}");
     }
     body.push('\n');
     Ok(())
