@@ -295,11 +295,16 @@ pub(crate) fn rest_after_keyword(line: &str) -> &str {
 /// Checks every `v` and `f` line of an OBJ file and reduces the file to what tobj needs, so tobj
 /// only ever sees well-formed input.
 pub(crate) fn scan_obj(path: &Path, text: &str) -> Result<ObjScan> {
+    scan_obj_in_chunks(path, text, SCAN_CHUNK)
+}
+
+/// [`scan_obj`] with chunks of about `chunk_bytes` bytes.
+fn scan_obj_in_chunks(path: &Path, text: &str, chunk_bytes: usize) -> Result<ObjScan> {
     // Whole lines in chunks of about SCAN_CHUNK bytes, scanned in parallel: a first pass
     // counts each chunk's lines and `v` lines (relative face indices count back from the
     // vertices before them), the second checks and reduces each chunk; the pieces are joined
     // in file order, and the first error in file order is the one reported.
-    let chunks = line_chunks(text, SCAN_CHUNK);
+    let chunks = line_chunks(text, chunk_bytes.max(1));
     let counts: Vec<(usize, usize)> = chunks
         .par_iter()
         .map(|chunk| {
@@ -635,4 +640,50 @@ pub(crate) fn scan_mtl(path: &Path, text: &str) -> Result<MtlScan> {
         }
     }
     Ok(scan)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Scans `text` in one chunk and in chunks of a few bytes: the same reduction, or the same
+    /// error.
+    fn same_in_chunks(text: &str) -> std::result::Result<(String, String, usize), String> {
+        let path = Path::new("t.obj");
+        let whole = scan_obj_in_chunks(path, text, usize::MAX);
+        for size in [1, 7, 30] {
+            let parts = scan_obj_in_chunks(path, text, size);
+            match (&whole, &parts) {
+                (Ok(a), Ok(b)) => {
+                    assert_eq!(
+                        (&a.vertices, &a.body, a.triangle_count),
+                        (&b.vertices, &b.body, b.triangle_count)
+                    );
+                    assert_eq!((&a.mtllibs, &a.usemtls), (&b.mtllibs, &b.usemtls));
+                }
+                (Err(a), Err(b)) => assert_eq!(a.to_string(), b.to_string()),
+                _ => panic!("chunks of {size} bytes disagree with one chunk"),
+            }
+        }
+        whole
+            .map(|s| (s.vertices, s.body, s.triangle_count))
+            .map_err(|e| e.to_string())
+    }
+
+    #[test]
+    fn chunked_scan_matches_one_chunk() {
+        let text = "mtllib a.mtl\nv 0 0 0\nv 1 0 0 # c\nv 0 1 0\nusemtl m\nf -3 -2 -1\n\
+                    v 0 0 1 2\nf 1/1 2//3 4 3\r\nf -1 1 2\n";
+        let (vertices, body, triangles) = same_in_chunks(text).expect("valid");
+        assert_eq!(
+            vertices,
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0e0 0e0 5e-1\n".to_string()
+        );
+        assert_eq!(body, "usemtl m\nf 1 2 3\nf 1 2 4 3\nf 4 1 2\n");
+        assert_eq!(triangles, 4);
+        // Two errors: the first in file order is reported, whatever the chunks.
+        let bad = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 9\nv 1 x 0\n";
+        let message = same_in_chunks(bad).expect_err("invalid");
+        assert!(message.contains(":5:"), "{message}");
+    }
 }
