@@ -353,34 +353,126 @@ pub fn build_patches(scene: &Scene, max_edge: Option<f64>) -> Patches {
         1.0
     };
 
+    let twin = scene.duplicates();
     let mut patches = Patches {
         frame,
         emission_scale,
-        twin: scene.duplicates(),
-        back_twin: scene.back_to_back_twins(),
+        back_twin: scene.back_to_back_twins_given(&twin),
+        twin,
         ..Patches::default()
     };
     let mut has_back_twin = vec![false; scene.len()];
     for &u in patches.back_twin.iter().flatten() {
         has_back_twin[u as usize] = true;
     }
-    for t in 0..scene.len() {
-        patches.first.push(patches.len() as u32);
-        let world = scene.corners(t);
-        let unit: Tri = world.map(|p| frame.unit_from_world(p));
-        let emission = scene.emission[t].map(|e| e / emission_scale);
-        let degenerate = scene.is_degenerate(t);
-        let active = !degenerate && patches.twin[t].is_none() && patches.back_twin[t].is_none();
-        let k = split_factor(&world, degenerate, max_edge) as usize;
-        let two_sided = scene.is_two_sided(t) || has_back_twin[t];
-        for piece in geometry::subdivide(&unit, k) {
-            patches.push(piece, t as u32, scene.albedo[t], emission, active);
-            patches.two_sided.push(two_sided);
-        }
+    if max_edge.is_none() {
+        // One patch per triangle: each array in parallel, as `push` would fill it.
+        patches.whole_triangles(scene, &has_back_twin);
+    } else {
+        patches.split_triangles(scene, max_edge, &has_back_twin);
     }
-    patches.first.push(patches.len() as u32);
     if !scene.lights.is_empty() {
         lights::attach(&mut patches, &scene.lights);
     }
     patches
+}
+
+impl Patches {
+    /// [`build_patches`]'s patches when no triangle is split: patch `t` is triangle `t`.
+    fn whole_triangles(&mut self, scene: &Scene, has_back_twin: &[bool]) {
+        use rayon::prelude::*;
+        let (frame, scale) = (self.frame, self.emission_scale);
+        let n = scene.len();
+        self.corners = (0..n)
+            .into_par_iter()
+            .map(|t| scene.corners(t).map(|p| frame.unit_from_world(p)))
+            .collect();
+        let normal: Vec<Option<DVec3>> = self.corners.par_iter().map(geometry::normal).collect();
+        self.active = (0..n)
+            .into_par_iter()
+            .map(|t| {
+                !scene.is_degenerate(t)
+                    && self.twin[t].is_none()
+                    && self.back_twin[t].is_none()
+                    && normal[t].is_some()
+            })
+            .collect();
+        self.normal = normal
+            .par_iter()
+            .map(|n| n.unwrap_or(DVec3::ZERO))
+            .collect();
+        self.area = (self.corners.par_iter().zip(&self.active))
+            .map(|(c, &active)| if active { geometry::area(c) } else { 0.0 })
+            .collect();
+        self.centroid = self.corners.par_iter().map(geometry::centroid).collect();
+        self.parent = (0..n as u32).collect();
+        self.albedo = scene.albedo.clone();
+        self.emission = scene
+            .emission
+            .par_iter()
+            .map(|e| e.map(|e| e / scale))
+            .collect();
+        self.two_sided = (0..n)
+            .into_par_iter()
+            .map(|t| scene.is_two_sided(t) || has_back_twin[t])
+            .collect();
+        self.first = (0..=n as u32).collect();
+    }
+
+    /// [`build_patches`]'s patches, each triangle split by [`split_factor`] for `max_edge`.
+    fn split_triangles(&mut self, scene: &Scene, max_edge: Option<f64>, has_back_twin: &[bool]) {
+        let (frame, emission_scale) = (self.frame, self.emission_scale);
+        let patches = self;
+        for t in 0..scene.len() {
+            patches.first.push(patches.len() as u32);
+            let world = scene.corners(t);
+            let unit: Tri = world.map(|p| frame.unit_from_world(p));
+            let emission = scene.emission[t].map(|e| e / emission_scale);
+            let degenerate = scene.is_degenerate(t);
+            let active = !degenerate && patches.twin[t].is_none() && patches.back_twin[t].is_none();
+            let k = split_factor(&world, degenerate, max_edge) as usize;
+            let two_sided = scene.is_two_sided(t) || has_back_twin[t];
+            for piece in geometry::subdivide(&unit, k) {
+                patches.push(piece, t as u32, scene.albedo[t], emission, active);
+                patches.two_sided.push(two_sided);
+            }
+        }
+        patches.first.push(patches.len() as u32);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Without `max_edge` every array is filled in parallel; with a `max_edge` no triangle
+    /// reaches, one triangle at a time by `push`. Both must make the same patches, with a
+    /// duplicate, a back-to-back twin, a degenerate and a two-sided triangle among them.
+    #[test]
+    fn whole_triangles_match_the_triangle_by_triangle_build() {
+        let mut scene = crate::scene::generated::cornell_box();
+        let [a, b, c] = scene.triangles[3];
+        for tri in [[a, b, c], [a, c, b], [a, a, b]] {
+            scene.triangles.push(tri);
+            scene.albedo.push(scene.albedo[3]);
+            scene.emission.push(scene.emission[3]);
+        }
+        scene.two_sided = vec![false, true];
+        let whole = build_patches(&scene, None);
+        let split = build_patches(&scene, Some(1e9));
+        assert_eq!(whole.len(), scene.len());
+        assert!(whole.twin.iter().any(Option::is_some));
+        assert!(whole.back_twin.iter().any(Option::is_some));
+        assert!(whole.active.iter().any(|a| !a));
+        assert_eq!(whole.corners, split.corners);
+        assert_eq!(whole.normal, split.normal);
+        assert_eq!(whole.area, split.area);
+        assert_eq!(whole.centroid, split.centroid);
+        assert_eq!(whole.parent, split.parent);
+        assert_eq!(whole.albedo, split.albedo);
+        assert_eq!(whole.emission, split.emission);
+        assert_eq!(whole.active, split.active);
+        assert_eq!(whole.first, split.first);
+        assert_eq!(whole.two_sided, split.two_sided);
+    }
 }

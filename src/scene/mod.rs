@@ -407,7 +407,11 @@ impl Scene {
     /// into the earlier triangle made two-sided, whose back face is the twin
     /// ([`crate::mesh::Patches::back_twin`]).
     pub fn back_to_back_twins(&self) -> Vec<Option<u32>> {
-        let duplicates = self.duplicates();
+        self.back_to_back_twins_given(&self.duplicates())
+    }
+
+    /// [`Scene::back_to_back_twins`] with the scene's [`Scene::duplicates`] already known.
+    pub fn back_to_back_twins_given(&self, duplicates: &[Option<u32>]) -> Vec<Option<u32>> {
         // Every triangle that is neither degenerate nor a duplicate has a corner sequence of its
         // own: the later of a pair whose sequences are each other's reverse is the twin of the
         // earlier (each sequence being unique, "already paired" cannot happen).
