@@ -423,7 +423,7 @@ impl Patches {
     fn split_triangles(&mut self, scene: &Scene, max_edge: Option<f64>, has_back_twin: &[bool]) {
         let (frame, emission_scale) = (self.frame, self.emission_scale);
         let patches = self;
-        for t in 0..scene.len() {
+        for (t, &back_twinned) in has_back_twin.iter().enumerate() {
             patches.first.push(patches.len() as u32);
             let world = scene.corners(t);
             let unit: Tri = world.map(|p| frame.unit_from_world(p));
@@ -431,7 +431,7 @@ impl Patches {
             let degenerate = scene.is_degenerate(t);
             let active = !degenerate && patches.twin[t].is_none() && patches.back_twin[t].is_none();
             let k = split_factor(&world, degenerate, max_edge) as usize;
-            let two_sided = scene.is_two_sided(t) || has_back_twin[t];
+            let two_sided = scene.is_two_sided(t) || back_twinned;
             for piece in geometry::subdivide(&unit, k) {
                 patches.push(piece, t as u32, scene.albedo[t], emission, active);
                 patches.two_sided.push(two_sided);
