@@ -99,8 +99,12 @@ pub const GROWTH_FACTOR: f64 = 1e4;
 pub const DAMP_AFTER_RISING: usize = 4;
 
 /// Sweeps without a new smallest change after which a solver damps its sweeps (see
-/// [`DAMP_AFTER_RISING`]).
-pub const DAMP_AFTER_STALLING: usize = 8;
+/// [`DAMP_AFTER_RISING`]). A converging iteration, plain or mixed, makes a new smallest change
+/// every sweep or two; one that has not for 4 sweeps oscillates. b90_office (default preset,
+/// Anderson mixing) stalls from its 13th sweep: damped after 17 it converges at 30 sweeps, after
+/// 21 (at 8) it took 35, to the same answer (0.003% apart). The generated office takes 69
+/// sweeps either way; the seed room, bear in a room, classroom and the boxes are never damped.
+pub const DAMP_AFTER_STALLING: usize = 4;
 
 /// Weight of a damped sweep's output: the next state is `x + DAMPING * (G(x) - x)`.
 ///
