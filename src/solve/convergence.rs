@@ -50,10 +50,11 @@ impl Convergence {
     pub fn update(&mut self, residual: f64, tol: f64) -> bool {
         self.residual = residual;
         let q = match self.previous {
-            Some(p) if p > 0.0 => (residual / p).min(MAX_CONTRACTION),
+            Some(p) if p > 0.0 => residual / p,
             _ => self.q_at_jump.unwrap_or(0.9),
         };
         if self.previous.is_some() {
+            // As measured: a sweep that did not contract must not pass for a slow contraction.
             self.ratios.push(q);
         }
         self.since_extrapolation += 1;
@@ -139,7 +140,10 @@ impl Convergence {
         let settled = pairs
             .iter()
             .all(|p| (p - q2).abs() <= TWO_SWEEP_SETTLED * q2);
-        if !(settled && q2 > 0.0025 && q2 < MAX_CONTRACTION) {
+        // Every sweep contracted: a growing sweep (ratio 1.2) beside a shrinking one is not a
+        // steady two-sweep contraction, and ratios held at the cap would jump by 1/(1 - 0.9998).
+        let contracting = r.iter().all(|&q| q < MAX_CONTRACTION);
+        if !(settled && contracting && q2 > 0.0025 && q2 < MAX_CONTRACTION) {
             return None;
         }
         Some(self.jump(q2, q2.sqrt()))
@@ -267,6 +271,23 @@ mod tests {
     use super::*;
 
     /// Residuals contracting by a steady 0.5: one jump once three ratios agree, by q / (1 - q).
+    /// Residuals that grow (by 1.2 a sweep, or by turns 0.5 and 1.9, whose two-sweep products
+    /// agree at 0.95) are not a contraction: no jump of either kind. (With the ratios held at the
+    /// cap the growing ones passed for a two-sweep contraction of 0.9998 and jumped by 4999.)
+    #[test]
+    fn growing_residuals_never_extrapolate() {
+        for steps in [[1.2, 1.2], [0.5, 1.9]] {
+            let mut c = Convergence::default();
+            let mut r = 1.0;
+            for k in 0..12 {
+                c.update(r, 1e-9);
+                assert_eq!(c.extrapolation_factor(), None, "{steps:?} sweep {k}");
+                assert_eq!(c.two_sweep_factor(), None, "{steps:?} sweep {k}");
+                r *= steps[k % 2];
+            }
+        }
+    }
+
     #[test]
     fn a_steady_contraction_extrapolates() {
         let mut c = Convergence::default();
