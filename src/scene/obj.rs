@@ -272,6 +272,19 @@ pub(crate) struct ObjScan {
     body: String,
 }
 
+impl ObjScan {
+    /// An empty scan with room for the reduction of `bytes` bytes of OBJ text.
+    fn with_capacity(bytes: usize) -> ObjScan {
+        ObjScan {
+            mtllibs: Vec::new(),
+            usemtls: Vec::new(),
+            triangle_count: 0,
+            vertices: String::with_capacity(bytes / 2),
+            body: String::with_capacity(bytes / 2),
+        }
+    }
+}
+
 pub(crate) fn parse_err(path: &Path, line: usize, message: impl Into<String>) -> Error {
     Error::Parse {
         path: path.to_path_buf(),
@@ -326,13 +339,7 @@ fn scan_obj_in_chunks(path: &Path, text: &str, chunk_bytes: usize) -> Result<Obj
         .zip(&starts)
         .map(|(chunk, &(line0, vertex0))| scan_chunk(path, chunk, line0, vertex0, vertex_total))
         .collect();
-    let mut scan = ObjScan {
-        mtllibs: Vec::new(),
-        usemtls: Vec::new(),
-        triangle_count: 0,
-        vertices: String::with_capacity(text.len() / 2),
-        body: String::with_capacity(text.len() / 2),
-    };
+    let mut scan = ObjScan::with_capacity(text.len());
     for piece in pieces {
         let piece = piece?;
         scan.mtllibs.extend(piece.mtllibs);
@@ -389,13 +396,7 @@ fn scan_chunk(
     vertex_total: usize,
 ) -> Result<ObjScan> {
     let mut vertices_so_far = vertex0;
-    let mut scan = ObjScan {
-        mtllibs: Vec::new(),
-        usemtls: Vec::new(),
-        triangle_count: 0,
-        vertices: String::with_capacity(chunk.len() / 2),
-        body: String::with_capacity(chunk.len() / 2),
-    };
+    let mut scan = ObjScan::with_capacity(chunk.len());
     let mut refs: Vec<&str> = Vec::new();
     for (i, raw) in chunk.lines().enumerate() {
         let line_no = line0 + i + 1;
