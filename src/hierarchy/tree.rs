@@ -206,10 +206,12 @@ pub fn signed_extent(node: &Node, n: DVec3, d: f64) -> (f64, f64) {
 const SPLIT_BINS: usize = 16;
 
 /// The bin (0..[`SPLIT_BINS`]) of grid position `g` in a range starting at `lo`, `span` wide.
-/// (Grid positions are unit-frame coordinates over [`geometry::SCENE_EPS`], at most 1e5 or so
-/// apart, so the product cannot overflow.)
+/// (Unit-frame grid positions are at most about 1e5 apart; wider ones take the 128-bit path.)
 fn split_bin(g: i64, lo: i64, span: i64) -> usize {
-    ((g - lo) * SPLIT_BINS as i64 / span) as usize
+    match (g - lo).checked_mul(SPLIT_BINS as i64) {
+        Some(scaled) => (scaled / span) as usize,
+        None => ((g - lo) as i128 * SPLIT_BINS as i128 / span as i128) as usize,
+    }
 }
 
 /// What the splits of [`split_range`] read of every patch, computed once.

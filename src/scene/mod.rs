@@ -410,16 +410,18 @@ impl Scene {
         self.back_to_back_twins_given(&self.duplicates())
     }
 
-    /// [`Scene::back_to_back_twins`] with the scene's [`Scene::duplicates`] already known.
+    /// [`Scene::back_to_back_twins`] with the scene's [`Scene::duplicates`] already known
+    /// (`duplicates`: one entry per triangle; a missing entry counts as not a duplicate).
     pub fn back_to_back_twins_given(&self, duplicates: &[Option<u32>]) -> Vec<Option<u32>> {
+        let duplicate = |t: usize| duplicates.get(t).copied().flatten().is_some();
         // Every triangle that is neither degenerate nor a duplicate has a corner sequence of its
         // own: the later of a pair whose sequences are each other's reverse is the twin of the
         // earlier (each sequence being unique, "already paired" cannot happen).
-        let keyed = self.sorted_corner_keys(|t| duplicates[t].is_none());
+        let keyed = self.sorted_corner_keys(|t| !duplicate(t));
         (0..self.len())
             .into_par_iter()
             .map(|t| {
-                if self.is_degenerate(t) || duplicates[t].is_some() {
+                if self.is_degenerate(t) || duplicate(t) {
                     return None;
                 }
                 let [a, b, c] = self.corners(t).map(corner_key);
@@ -433,6 +435,15 @@ impl Scene {
             .collect()
     }
 
+    /// For every triangle, the first earlier triangle it duplicates, if any: same three corner
+    /// positions (bit for bit) in the same cyclic order, i.e. the same surface facing the same
+    /// way. Degenerate triangles are never duplicates.
+    ///
+    /// Duplicates must take part in transport only once: two coincident one-sided surfaces
+    /// would reflect the light they receive twice and, in front-only antiradiance, both send
+    /// the antiradiance that cancels the light behind them, which then cancels it twice (a
+    /// doubled plate made the shadow under it negative). Back-to-back copies (reversed corner
+    /// order, a thin two-sided wall) are not duplicates: see [`Scene::back_to_back_twins`].
     pub fn duplicates(&self) -> Vec<Option<u32>> {
         let keyed = self.sorted_corner_keys(|_| true);
         let mut first = vec![None; self.len()];
