@@ -1,7 +1,10 @@
 //! The per-triangle CSV (`index,area,emissive,r,g,b`): writing and reading it back.
 
+use std::fmt::Write as _;
 use std::io::Write;
 use std::path::Path;
+
+use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 use crate::files::{format_f64, write_atomic};
@@ -34,35 +37,63 @@ pub fn write_triangles_csv(path: &Path, scene: &Scene, solution: &Solution) -> R
     }
     let back = &solution.triangle_radiance_back;
     let with_back = back.len() == scene.len();
+    // Rows formatted in parallel, a block of rows per task, and written in order a batch of
+    // blocks at a time (so the text held at once stays bounded).
+    let row = |t: usize, out: &mut String| {
+        let b = solution.triangle_radiance[t];
+        // Writing to a String cannot fail.
+        let _ = write!(
+            out,
+            "{},{},{},{},{},{}",
+            t,
+            format_f64(scene.area(t)),
+            u8::from(scene.is_emitter(t)),
+            format_f64(b[0]),
+            format_f64(b[1]),
+            format_f64(b[2])
+        );
+        if with_back {
+            let k = back[t];
+            let _ = write!(
+                out,
+                ",{},{},{}",
+                format_f64(k[0]),
+                format_f64(k[1]),
+                format_f64(k[2])
+            );
+        }
+        out.push('\n');
+    };
+    let n = scene.len();
     write_atomic(path, |w| {
         write!(w, "{TRIANGLES_CSV_HEADER}")?;
         writeln!(w, "{}", if with_back { BACK_COLUMNS } else { "" })?;
-        for (t, b) in solution.triangle_radiance.iter().enumerate() {
-            write!(
-                w,
-                "{},{},{},{},{},{}",
-                t,
-                format_f64(scene.area(t)),
-                u8::from(scene.is_emitter(t)),
-                format_f64(b[0]),
-                format_f64(b[1]),
-                format_f64(b[2])
-            )?;
-            if with_back {
-                let k = back[t];
-                write!(
-                    w,
-                    ",{},{},{}",
-                    format_f64(k[0]),
-                    format_f64(k[1]),
-                    format_f64(k[2])
-                )?;
+        for batch in (0..n).step_by(CSV_BLOCK * CSV_BATCH) {
+            let blocks: Vec<String> = (batch..n.min(batch + CSV_BLOCK * CSV_BATCH))
+                .step_by(CSV_BLOCK)
+                .collect::<Vec<usize>>()
+                .into_par_iter()
+                .map(|first| {
+                    let mut out = String::with_capacity(CSV_BLOCK * 64);
+                    for t in first..n.min(first + CSV_BLOCK) {
+                        row(t, &mut out);
+                    }
+                    out
+                })
+                .collect();
+            for block in blocks {
+                w.write_all(block.as_bytes())?;
             }
-            writeln!(w)?;
         }
         Ok(())
     })
 }
+
+/// Rows of the per-triangle CSV one task formats.
+const CSV_BLOCK: usize = 8192;
+
+/// Blocks of rows formatted before they are written.
+const CSV_BATCH: usize = 64;
 
 /// Reads the per-triangle radiance (r, g, b columns) back from a CSV written by
 /// [`write_triangles_csv`], in row order.
