@@ -381,9 +381,11 @@ fn line_chunks(text: &str, size: usize) -> Vec<&str> {
     chunks
 }
 
-/// True for a `v` line (a vertex position).
+/// True for a `v` line (a vertex position): its first word, before any comment, is `v`
+/// (`content(raw).split_whitespace().next() == Some("v")`, without splitting the line).
 fn is_vertex_line(raw: &str) -> bool {
-    content(raw).split_whitespace().next() == Some("v")
+    let mut rest = raw.trim_start().chars();
+    rest.next() == Some('v') && rest.next().is_none_or(|c| c.is_whitespace() || c == '#')
 }
 
 /// [`scan_obj`] of one chunk of whole lines, whose first line is the file's line `line0 + 1`
@@ -669,6 +671,30 @@ mod tests {
         whole
             .map(|s| (s.vertices, s.body, s.triangle_count))
             .map_err(|e| e.to_string())
+    }
+
+    #[test]
+    fn vertex_lines_are_lines_whose_first_word_is_v() {
+        for line in [
+            "v 1 2 3",
+            "  v\t1 2 3",
+            "v",
+            "v#c",
+            "v # c",
+            "vt 0 0",
+            "vn 0 0 1",
+            "#v 1 2 3",
+            " # v",
+            "",
+            "f 1 2 3",
+            "\u{3000}v 1 2 3",
+            "v\u{3000}1",
+            "w 1",
+            "V 1 2 3",
+        ] {
+            let by_words = content(line).split_whitespace().next() == Some("v");
+            assert_eq!(is_vertex_line(line), by_words, "{line:?}");
+        }
     }
 
     #[test]
