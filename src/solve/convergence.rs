@@ -270,57 +270,50 @@ pub fn end_sweep(
 mod tests {
     use super::*;
 
-    /// Residuals contracting by a steady 0.5: one jump once three ratios agree, by q / (1 - q).
+    /// The jumps a solve would make over `sweeps` residuals starting at 1, each the one before
+    /// times `steps` in turn: (sweep, over two sweeps?, factor), the one-sweep jump tried first
+    /// as the solver does.
+    fn jumps(steps: &[f64], sweeps: usize) -> Vec<(usize, bool, f64)> {
+        let mut c = Convergence::default();
+        let mut r = 1.0;
+        let mut jumps = Vec::new();
+        for k in 0..sweeps {
+            c.update(r, 1e-9);
+            if let Some(f) = c.extrapolation_factor() {
+                jumps.push((k, false, f));
+            } else if let Some(f) = c.two_sweep_factor() {
+                jumps.push((k, true, f));
+            }
+            r *= steps[k % steps.len()];
+        }
+        jumps
+    }
+
     /// Residuals that grow (by 1.2 a sweep, or by turns 0.5 and 1.9, whose two-sweep products
     /// agree at 0.95) are not a contraction: no jump of either kind. (With the ratios held at the
     /// cap the growing ones passed for a two-sweep contraction of 0.9998 and jumped by 4999.)
     #[test]
     fn growing_residuals_never_extrapolate() {
-        for steps in [[1.2, 1.2], [0.5, 1.9]] {
-            let mut c = Convergence::default();
-            let mut r = 1.0;
-            for k in 0..12 {
-                c.update(r, 1e-9);
-                assert_eq!(c.extrapolation_factor(), None, "{steps:?} sweep {k}");
-                assert_eq!(c.two_sweep_factor(), None, "{steps:?} sweep {k}");
-                r *= steps[k % 2];
-            }
+        for steps in [&[1.2][..], &[0.5, 1.9]] {
+            assert_eq!(jumps(steps, 12), [], "{steps:?}");
         }
     }
 
+    /// Residuals contracting by a steady 0.5: one jump once three ratios agree, by q / (1 - q).
     #[test]
     fn a_steady_contraction_extrapolates() {
-        let mut c = Convergence::default();
-        let mut r = 1.0;
-        let mut jumps = Vec::new();
-        for k in 0..6 {
-            c.update(r, 1e-9);
-            if let Some(f) = c.extrapolation_factor() {
-                jumps.push((k, f));
-            }
-            r *= 0.5;
-        }
-        assert_eq!(jumps, [(3, 1.0)]);
+        assert_eq!(jumps(&[0.5], 6), [(3, false, 1.0)]);
     }
 
     /// Residuals contracting by 0.5 and 0.4 in turn: no jump over one sweep, one over two
     /// sweeps (by 0.2 / 0.8) once the products of consecutive ratios agree.
     #[test]
     fn an_alternating_contraction_extrapolates_over_two_sweeps() {
-        let mut c = Convergence::default();
-        let mut r = 1.0;
-        let mut jumps = Vec::new();
-        for k in 0..8 {
-            c.update(r, 1e-9);
-            assert_eq!(c.extrapolation_factor(), None, "sweep {k}");
-            if let Some(f) = c.two_sweep_factor() {
-                jumps.push((k, f));
-            }
-            r *= if k % 2 == 0 { 0.5 } else { 0.4 };
-        }
+        let jumps = jumps(&[0.5, 0.4], 8);
         assert_eq!(jumps.len(), 1, "{jumps:?}");
         assert_eq!(jumps[0].0, 4);
-        assert!((jumps[0].1 - 0.25).abs() < 1e-12, "{jumps:?}");
+        assert!(jumps[0].1, "{jumps:?}");
+        assert!((jumps[0].2 - 0.25).abs() < 1e-12, "{jumps:?}");
     }
 
     /// A linear iteration with a mode that decays and one that changes sign (eigenvalues 0.6
