@@ -99,9 +99,7 @@ impl HierarchicalCosts {
         let entries = c
             .entries
             .unwrap_or(c.exact_pairs.saturating_mul(ENTRIES_PER_PAIR));
-        let groups = c
-            .groups
-            .unwrap_or((n as f64 * self.groups_per_element).ceil() as u64);
+        let groups = self.groups(c);
         let tree = c.nodes * size_of::<Node>() as u64;
         let link = CLUSTER_LINK_BYTES;
         let entry = size_of::<Entry>() as u64;
@@ -137,6 +135,12 @@ impl HierarchicalCosts {
         refine.max(held + self.state_bytes(c))
     }
 
+    /// The sender normal groups of `c`: as counted, else the assumed share per element.
+    fn groups(&self, c: &ModelCounts) -> u64 {
+        c.groups
+            .unwrap_or((c.elements as f64 * self.groups_per_element).ceil() as u64)
+    }
+
     /// The part of [`HierarchicalCosts::bytes`] that a solve allocates when it starts and frees
     /// when it ends (what the exact direct light, computed before, does not share the memory
     /// with): per element its emission and albedo in the state's channels, change sums and RGB
@@ -147,9 +151,7 @@ impl HierarchicalCosts {
         let (nb, ch) = (self.bins, self.channels);
         let n = c.elements;
         let slots = c.slots.unwrap_or(n.saturating_mul(nb.div_ceil(2)));
-        let groups = c
-            .groups
-            .unwrap_or((n as f64 * self.groups_per_element).ceil() as u64);
+        let groups = self.groups(c);
         n * (16 * ch + 48)
             + groups * 8 * ch * (2 + nb)
             + slots * 4 * ch * 3

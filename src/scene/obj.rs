@@ -321,9 +321,9 @@ fn scan_obj_in_chunks(path: &Path, text: &str, chunk_bytes: usize) -> Result<Obj
     let counts: Vec<(usize, usize)> = chunks
         .par_iter()
         .map(|chunk| {
-            let lines = chunk.lines().count();
-            let vertices = chunk.lines().filter(|l| is_vertex_line(l)).count();
-            (lines, vertices)
+            chunk.lines().fold((0, 0), |(lines, vertices), l| {
+                (lines + 1, vertices + usize::from(is_vertex_line(l)))
+            })
         })
         .collect();
     let vertex_total: usize = counts.iter().map(|c| c.1).sum();
@@ -701,7 +701,10 @@ mod tests {
     fn chunked_scan_matches_one_chunk() {
         let text = "mtllib a.mtl\nv 0 0 0\nv 1 0 0 # c\nv 0 1 0\nusemtl m\nf -3 -2 -1\n\
                     v 0 0 1 2\nf 1/1 2//3 4 3\r\nf -1 1 2\n";
-        let (vertices, body, triangles) = same_in_chunks(text).expect("valid");
+        let scanned = same_in_chunks(text);
+        let Ok((vertices, body, triangles)) = scanned else {
+            panic!("a valid file failed: {scanned:?}");
+        };
         assert_eq!(
             vertices,
             "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0e0 0e0 5e-1\n".to_string()
@@ -710,7 +713,10 @@ mod tests {
         assert_eq!(triangles, 4);
         // Two errors: the first in file order is reported, whatever the chunks.
         let bad = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 9\nv 1 x 0\n";
-        let message = same_in_chunks(bad).expect_err("invalid");
+        let scanned = same_in_chunks(bad);
+        let Err(message) = scanned else {
+            panic!("an invalid file passed: {scanned:?}");
+        };
         assert!(message.contains(":5:"), "{message}");
     }
 }

@@ -277,7 +277,9 @@ impl Prepared {
         radiance_back: &[[f64; C]],
         anti: &[[f32; C]],
     ) -> Option<TwoBack<C>> {
-        let bytes = ((radiance.len() + radiance_back.len()) * 8 * C + anti.len() * 4 * C) as u64;
+        let bytes = (std::mem::size_of_val(radiance)
+            + std::mem::size_of_val(radiance_back)
+            + std::mem::size_of_val(anti)) as u64;
         if !plain || bytes > self.budget.spare(memory.estimate_bytes) {
             return None;
         }

@@ -248,7 +248,8 @@ impl Prepared {
     /// Bytes the memory limit leaves for the exact direct light: beside the model's estimate
     /// without the solve's state, which is allocated after the direct light is freed.
     pub(crate) fn spare_bytes(&self) -> u64 {
-        (self.budget).spare(self.memory.estimate_bytes.saturating_sub(self.state_bytes))
+        self.budget
+            .spare(self.memory.estimate_bytes.saturating_sub(self.state_bytes))
     }
 
     /// Counts the exact direct light, estimated at `bytes` ([`crate::solve::budget::direct_light_bytes`]),

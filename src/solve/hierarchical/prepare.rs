@@ -169,7 +169,7 @@ impl Prepared {
             }
         };
         let link_budget = &LinkBudget {
-            costs: (link_budget.costs).with_group_share(share),
+            costs: link_budget.costs.with_group_share(share),
             ..*link_budget
         };
         let t1 = Instant::now();
