@@ -224,6 +224,10 @@ impl Prepared {
         }
         stats.iterations = last + 1 - first;
         stats.residual = convergence.residual;
+        // The sweeps' buffers go before the result is assembled, so that they do not add to its
+        // peak (at 1M triangles the link intensities alone are hundreds of MB).
+        drop((scratch, two_back, x_flat, g_flat));
+        drop((next_radiance, next_radiance_back, next_anti));
 
         self.finish_channels(
             patches,
