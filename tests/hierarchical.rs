@@ -331,3 +331,33 @@ fn a_tiny_cube_on_a_floor_splits_nothing() {
     eprintln!("the box's triangles with the cube against without: {err:.5}");
     assert!(err < 0.005, "the cube moved the box's result by {err}");
 }
+
+/// The same 1 mm cube on the Cornell box's floor: its pairs are faint, so they are integrated
+/// over at most 2 x 2 receiver points, and they do not raise the quadrature of the floor
+/// triangles they touch (whose other senders keep the points their own nearest needs). The
+/// cube adds at most 4 points per exact pair it adds (with the rule of the nearest pair, a
+/// floor triangle under the cube took 6 x 6 points for every one of its senders).
+#[test]
+fn faint_pairs_take_at_most_two_by_two_points() {
+    use antiradiance::scene::generated::push_cube;
+    let mut scene = generated::cornell_box();
+    push_cube(&mut scene, glam::DVec3::new(200.0, 0.0, 150.0), 1.0, 0.5);
+    let options = SolverOptions::default();
+    let stats = |patches: &Patches| {
+        let prepared = Prepared::new(patches, &options, false).unwrap();
+        prepared.links.stats
+    };
+    let alone = stats(&build_patches(&generated::cornell_box(), None));
+    let with = stats(&build_patches(&scene, None));
+    let added_pairs = with.exact_element_pairs - alone.exact_element_pairs;
+    let added_points = with.quadrature_points as i64 - alone.quadrature_points as i64;
+    eprintln!(
+        "exact pairs +{added_pairs} ({} faint), quadrature points {added_points:+}",
+        with.faint_exact
+    );
+    assert!(with.faint_exact > 0 && added_pairs > 0);
+    assert!(
+        added_points <= 4 * added_pairs as i64,
+        "the cube added {added_points} points for {added_pairs} exact pairs"
+    );
+}

@@ -321,7 +321,21 @@ pub fn refine(
     budget.check(&held)?;
     let meter = Meter::new(budget, held);
     let any_two_sided = (tree.elements.iter()).any(|&node| tree.nodes[node as usize].two_sided);
-    let rows = exact::couple_exact(tree, exact_pairs, bins, coupling, &meter);
+    let rows = exact::couple_exact(
+        tree,
+        exact_pairs,
+        |s, r| {
+            traverse::faint(
+                &tree.nodes[s as usize],
+                &tree.nodes[r as usize],
+                params,
+                limit,
+            )
+        },
+        bins,
+        coupling,
+        &meter,
+    );
     if meter.is_over() {
         return Err(meter.over_budget());
     }
