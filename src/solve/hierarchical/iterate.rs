@@ -166,7 +166,8 @@ impl Prepared {
         };
 
         let mut last = first - 1;
-        for iteration in first..first + options.max_iterations {
+        let (tol, max_iterations) = (options.tol, options.max_iterations);
+        for iteration in first..first + max_iterations {
             let sweep_start = Instant::now();
             last = iteration;
             sources.projection = guard.projection();
@@ -189,7 +190,7 @@ impl Prepared {
                 sums.num,
                 sums.largest,
                 sums.finite,
-                options.tol,
+                tol,
                 &mut guard,
                 &mut convergence,
                 &mut stats,
@@ -217,6 +218,9 @@ impl Prepared {
                 std::mem::swap(b, &mut next_radiance);
                 std::mem::swap(b_back, &mut next_radiance_back);
                 std::mem::swap(a, &mut next_anti);
+            }
+            if iteration + 1 - first == LATE_PAIR_CACHE_SWEEPS {
+                self.late_pair_cache(&mut memory);
             }
             if out_of_time(deadline, sweep_start) {
                 break;
@@ -289,6 +293,22 @@ impl Prepared {
         }
         memory.estimate_bytes += bytes;
         Some((radiance.to_vec(), radiance_back.to_vec(), anti.to_vec()))
+    }
+
+    /// Builds the pair cache of a solve that has run [`LATE_PAIR_CACHE_SWEEPS`] sweeps without
+    /// one (its factors did not fit [`crate::solve::SolverOptions::pair_cache_mb`]) when it
+    /// fits what the memory limit leaves beside `memory`'s estimate, which then counts it. The
+    /// cache turns each later sweep's gather into a stream; a solve that needs this many sweeps
+    /// has many left to save on.
+    fn late_pair_cache(&mut self, memory: &mut MemoryStats) {
+        if self.pairs.is_some() || self.options.pair_cache_mb == 0 {
+            return;
+        }
+        let spare = self.budget.spare(memory.estimate_bytes);
+        if let Ok(cache) = PairCache::build(&*self, spare) {
+            memory.estimate_bytes += cache.bytes();
+            self.pairs = Some(cache);
+        }
     }
 
     /// The state the next sweep starts from, after the sweep from `(radiance, ..)` gave

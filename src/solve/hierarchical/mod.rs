@@ -674,5 +674,11 @@ fn near_links_into_ancestors(
 /// Most memory the Anderson history may take; above it the solver extrapolates the tail instead.
 const ACCELERATION_BUDGET_BYTES: u64 = 512 << 20;
 
+/// Sweeps after which a solve still going builds the pair cache it was built without (its
+/// factors over [`crate::solve::SolverOptions::pair_cache_mb`]), within what the memory limit
+/// leaves. Solves of well-meshed scenes end before it (the seed room 6 sweeps, the boxes 8 or 9,
+/// the classroom 9), so their peak memory is unchanged.
+const LATE_PAIR_CACHE_SWEEPS: usize = 10;
+
 #[cfg(test)]
 mod tests;

@@ -137,3 +137,53 @@ fn an_attempt_after_a_split_one_builds_the_fresh_model() {
     };
     assert_eq!(senders(&again), senders(&fresh));
 }
+
+/// A solve whose pair cache did not fit its own budget builds it once it has run
+/// [`LATE_PAIR_CACHE_SWEEPS`] sweeps, counts it in its memory estimate, and gives the result of
+/// the solve that never caches (the cached gather sums the same f32 factors).
+#[test]
+fn a_long_solve_builds_its_pair_cache_late() {
+    let patches = build_patches(&generated::cornell_box(), Some(100.0));
+    let options = |pair_cache_mb| SolverOptions {
+        pair_cache_mb,
+        // Long enough to pass the late cache: plain sweeps to a tight tolerance.
+        acceleration_depth: 0,
+        tol: 1e-7,
+        direct_light: false,
+        ..SolverOptions::default()
+    };
+    let hidden = Progress::hidden();
+    // A cache of at most a byte never fits up front.
+    let prepare = || match Prepared::new(&patches, &options(0), false) {
+        Ok(prepared) => prepared,
+        Err(e) => panic!("the box does not fit: {e}"),
+    };
+    let mut late = prepare();
+    late.options.pair_cache_mb = 1;
+    assert!(late.pairs.is_none());
+    let mut never = prepare();
+    let (a, _) = late.solve(&patches, &hidden);
+    let (b, _) = never.solve(&patches, &hidden);
+    assert!(
+        a.stats.iterations > LATE_PAIR_CACHE_SWEEPS,
+        "{}",
+        a.stats.iterations
+    );
+    assert!(never.pairs.is_none());
+    let Some(cache) = late.pairs.as_ref() else {
+        panic!("no late pair cache after {} sweeps", a.stats.iterations);
+    };
+    let (estimate_late, estimate_never) = (
+        a.stats.memory.as_ref().map_or(0, |m| m.estimate_bytes),
+        b.stats.memory.as_ref().map_or(0, |m| m.estimate_bytes),
+    );
+    assert_eq!(estimate_late, estimate_never + cache.bytes());
+    for (x, y) in a.patch_radiance.iter().zip(&b.patch_radiance) {
+        for c in 0..3 {
+            assert!(
+                (x[c] - y[c]).abs() <= 1e-6 * y[c].abs().max(1e-6),
+                "{x:?} vs {y:?}"
+            );
+        }
+    }
+}
