@@ -244,11 +244,25 @@ fn spread_part(
         add_piece(part, omega);
         return;
     }
-    let pieces: SmallVec<[Tri; 64]> = geometry::subdivide(part, m).collect();
-    for group in pieces.chunks(geometry::LANES) {
-        let w = geometry::solid_angles_at(x, group).to_array();
-        for (piece, &w) in group.iter().zip(&w) {
+    // The pieces a lane group at a time, in subdivision order (collected whole, the up to 64
+    // pieces were an array of 4.6 kB moved on every call).
+    let mut pieces = geometry::subdivide(part, m);
+    let mut group = [[DVec3::ZERO; 3]; geometry::LANES];
+    loop {
+        let mut k = 0;
+        for (slot, piece) in group.iter_mut().zip(pieces.by_ref()) {
+            *slot = piece;
+            k += 1;
+        }
+        if k == 0 {
+            break;
+        }
+        let w = geometry::solid_angles_at(x, &group[..k]).to_array();
+        for (piece, &w) in group[..k].iter().zip(&w) {
             add_piece(piece, w);
+        }
+        if k < geometry::LANES {
+            break;
         }
     }
 }
