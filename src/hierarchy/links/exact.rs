@@ -102,8 +102,8 @@ const FAINT_POINTS: usize = 2;
 /// The exact couplings of the element pairs below the node pairs `exact_pairs` (a leaf
 /// recorded in a pair may have been split afterwards: the pair then stands for all pairs of
 /// elements below its two nodes), one [`Row`] per receiving element; `faint(s, r)` tells a
-/// faint node pair, whose element pairs take at most [`FAINT_POINTS`] per side. Counts the pairs and
-/// entries on `meter` and stops early once it is over.
+/// faint node pair, whose element pairs take at most [`FAINT_POINTS`] per side. Counts the
+/// pairs and entries on `meter` and stops early once it is over.
 pub(super) fn couple_exact(
     tree: &ClusterTree,
     exact_pairs: Vec<(u32, u32)>,

@@ -153,7 +153,8 @@ fn a_long_solve_builds_its_pair_cache_late() {
         ..SolverOptions::default()
     };
     let hidden = Progress::hidden();
-    // A cache of at most a byte never fits up front.
+    // Both built without a cache (0 MB disables it); then `late` is allowed one of 1 MB, which
+    // its factors do not fit up front but which does not bound the late cache.
     let prepare = || match Prepared::new(&patches, &options(0), false) {
         Ok(prepared) => prepared,
         Err(e) => panic!("the box does not fit: {e}"),
