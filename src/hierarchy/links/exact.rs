@@ -104,23 +104,23 @@ const FAINT_POINTS: usize = 2;
 
 /// The exact couplings of the element pairs below the node pairs `exact_pairs` (a leaf
 /// recorded in a pair may have been split afterwards: the pair then stands for all pairs of
-/// elements below its two nodes), one [`Row`] per receiving element; `faint(s, r)` tells a
-/// faint node pair, whose element pairs take at most [`FAINT_POINTS`] per side. Counts the
-/// pairs and entries on `meter` and stops early once it is over.
+/// elements below its two nodes), one [`Row`] per receiving element; `faint[i]` tells whether
+/// `exact_pairs[i]` is faint, whose element pairs take at most [`FAINT_POINTS`] per side.
+/// Counts the pairs and entries on `meter` and stops early once it is over.
 pub(super) fn couple_exact(
     tree: &ClusterTree,
     exact_pairs: Vec<(u32, u32)>,
-    faint: impl Fn(u32, u32) -> bool + Sync,
+    faint: &[bool],
     bins: &Bins,
     coupling: &CouplingParams,
     meter: &Meter,
 ) -> Vec<Row> {
     let mut exact_pairs: Vec<(u32, u32, bool)> = exact_pairs
         .into_iter()
-        .flat_map(|(s, r)| {
+        .zip(faint)
+        .flat_map(|((s, r), &f)| {
             let (s0, s1) = tree.nodes[s as usize].elements;
             let (r0, r1) = tree.nodes[r as usize].elements;
-            let f = faint(s, r);
             (r0..r1).flat_map(move |re| (s0..s1).map(move |se| (re, se, f)))
         })
         .collect();

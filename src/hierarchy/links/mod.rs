@@ -277,9 +277,13 @@ pub fn refine(
     } = Found::concat(pieces);
     stats.leaf_splits = leaf_splits;
     let limit = traverse::flux_limit(params, tree);
+    // Which exact pairs are faint: counted here, coupled with fewer points below.
+    let mut faint = Vec::with_capacity(exact_pairs.len());
     for &(s, r) in &exact_pairs {
         let (sn, rn) = (&tree.nodes[s as usize], &tree.nodes[r as usize]);
-        if traverse::faint(sn, rn, params, limit) {
+        let is_faint = traverse::faint(sn, rn, params, limit);
+        faint.push(is_faint);
+        if is_faint {
             stats.faint_exact += 1;
         }
         if sphere_gap(tree, s, r) > 0.0 {
@@ -321,21 +325,7 @@ pub fn refine(
     budget.check(&held)?;
     let meter = Meter::new(budget, held);
     let any_two_sided = (tree.elements.iter()).any(|&node| tree.nodes[node as usize].two_sided);
-    let rows = exact::couple_exact(
-        tree,
-        exact_pairs,
-        |s, r| {
-            traverse::faint(
-                &tree.nodes[s as usize],
-                &tree.nodes[r as usize],
-                params,
-                limit,
-            )
-        },
-        bins,
-        coupling,
-        &meter,
-    );
+    let rows = exact::couple_exact(tree, exact_pairs, &faint, bins, coupling, &meter);
     if meter.is_over() {
         return Err(meter.over_budget());
     }
