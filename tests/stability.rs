@@ -512,3 +512,35 @@ fn emission_1e_minus_30_and_1e30_scale_exactly() {
         }
     }
 }
+
+/// Every solve records each sweep's relative change (`stats.sweep_changes`), the figures its
+/// convergence and health checks read: one per sweep, the last the reported residual. In the
+/// furnace without exact direct light (uniform radiance, every form-factor row summing to 1)
+/// sweep k adds `rho^k E`, so its change is exactly `rho^k / (1 + rho + .. + rho^k)`: every
+/// plain sweep of the dense solver, and the hierarchical solver's first two (it then
+/// extrapolates over the geometric tail, and its third change is about 0).
+#[test]
+fn sweep_changes_record_every_sweep() {
+    let rho: f64 = 0.5;
+    let scene = generated::furnace_box(1.0, rho);
+    let options = SolverOptions {
+        direct_light: false,
+        ..SolverOptions::default()
+    };
+    for (name, sol) in solve_both(&scene, &options) {
+        let changes = &sol.stats.sweep_changes;
+        eprintln!("{name}: {changes:?}");
+        assert_eq!(changes.len(), sol.stats.iterations, "{name}");
+        assert_eq!(changes.last(), Some(&sol.stats.residual), "{name}");
+        let plain = if name == "dense" { changes.len() } else { 2 };
+        assert!(changes.len() >= plain, "{name}: {changes:?}");
+        for (k, &c) in changes.iter().enumerate().take(plain) {
+            let k = k as i32 + 1;
+            let expected = rho.powi(k) / (0..=k).map(|i| rho.powi(i)).sum::<f64>();
+            assert!(
+                rel(c, expected) < 1e-6,
+                "{name}: sweep {k}: change {c}, expected {expected}"
+            );
+        }
+    }
+}

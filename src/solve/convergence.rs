@@ -230,7 +230,8 @@ pub fn damp_if_damped<const N: usize>(
     }
 }
 
-/// The end of sweep `iteration` (1-based), the same in both solvers: counts it, shows its
+/// The end of sweep `iteration` (1-based), the same in both solvers: counts it, records its
+/// change in `stats.sweep_changes`, shows its
 /// `change` on the progress bar, asks the health `guard` (`num` the change's numerator,
 /// `largest` the largest |B|, `finite` whether every value is finite) and then `convergence`
 /// (against `tol`). True when the solve stops here: it failed (`stats.failure` is set) or
@@ -249,6 +250,7 @@ pub fn end_sweep(
     progress: &Progress,
 ) -> bool {
     stats.iterations = iteration;
+    stats.sweep_changes.push(change);
     progress.inc(1);
     progress.message(format!("residual {change:.2e}"));
     if let Some(failure) = guard.sweep(iteration, change, num, largest, finite) {

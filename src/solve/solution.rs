@@ -17,6 +17,12 @@ pub struct SolveStats {
     pub residual: f64,
     /// True when the residual went under the tolerance before the iteration cap.
     pub converged: bool,
+    /// Per sweep of this solve (dense or hierarchical), its relative change: the L1,
+    /// area-weighted change of the radiance over its L1 norm, the figure the convergence
+    /// estimate and the health checks read. In sweep order; empty for the path tracer and for
+    /// mixes of precomputed lights.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub sweep_changes: Vec<f64>,
     /// The sweep after which the solver damped its sweeps because their change kept growing
     /// ([`crate::solve::health::DAMPING`]); `None` when every sweep was plain.
     #[serde(skip_serializing_if = "Option::is_none")]

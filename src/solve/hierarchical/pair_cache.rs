@@ -48,9 +48,11 @@ impl PairCache {
             return Err(bytes);
         }
         let mut start = Vec::with_capacity(n + 1);
-        start.push(0);
-        for c in &counts {
-            start.push(start.last().expect("pushed") + *c as u64);
+        let mut sum = 0u64;
+        start.push(sum);
+        for &c in &counts {
+            sum += c as u64;
+            start.push(sum);
         }
         let mut factor = vec![[0.0f32; 2]; total];
         let ctx = prepared.sweep_context();
