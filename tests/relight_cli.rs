@@ -213,7 +213,7 @@ fn cli_moves_and_dims_an_analytic_light_progressively() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let json: Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
     let frames = json["frames"].as_array().unwrap();
-    assert_eq!(frames[0]["direct_seconds"].as_f64().unwrap() > 0.0, true);
+    assert!(frames[0]["direct_seconds"].as_f64().unwrap() > 0.0);
     assert_eq!(frames[1]["direct_seconds"].as_f64().unwrap(), 0.0);
 }
 

@@ -1,6 +1,7 @@
 //! A textured quad's albedo equals the analytic mean of its texture over each triangle, from
 //! glTF and from OBJ+MTL (PNG, TGA, JPEG), with wrap modes respected; emissive textures and
 //! emissive strength; an unreadable texture is a warning and the factor is used.
+#![allow(clippy::needless_range_loop)] // channels and triangles index several arrays at once
 
 mod gltf_common;
 

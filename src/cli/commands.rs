@@ -28,7 +28,7 @@ pub fn solve(args: &SolveArgs) -> Result<()> {
     })?;
     let cap = solve_warnings(args.solver, &solution.stats, &options, &loaded.patches);
     for w in &cap {
-        print_warning(&w);
+        print_warning(w);
     }
     // A failed solve writes no result (picture, PLY, CSV); its report says why.
     let failed = solution.stats.check(args.solver.name());

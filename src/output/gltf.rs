@@ -58,7 +58,7 @@ fn f32_of(x: f64) -> f32 {
 
 impl Builder {
     fn view(&mut self, bytes: &[u8], target: Option<u32>) -> usize {
-        while self.bin.len() % 4 != 0 {
+        while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
         let mut v = json!({
@@ -128,14 +128,14 @@ impl Builder {
 
     /// The whole GLB: `json` completed with the buffer, views and accessors.
     fn glb(mut self, mut json: Value) -> Vec<u8> {
-        while self.bin.len() % 4 != 0 {
+        while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
         json["buffers"] = json!([{ "byteLength": self.bin.len() }]);
         json["bufferViews"] = Value::Array(std::mem::take(&mut self.views));
         json["accessors"] = Value::Array(std::mem::take(&mut self.accessors));
         let mut text = serde_json::to_vec(&json).unwrap_or_default();
-        while text.len() % 4 != 0 {
+        while !text.len().is_multiple_of(4) {
             text.push(b' ');
         }
         let total = 12 + 8 + text.len() + 8 + self.bin.len();

@@ -625,7 +625,7 @@ pub(crate) fn apply_obj_textures(
     let mut missing_uv: HashMap<String, usize> = HashMap::new();
     let mut clamped: HashMap<String, usize> = HashMap::new();
     let max = crate::scene::ALBEDO_MAX;
-    for t in 0..scene.len() {
+    for (t, &uv_t) in uvs.iter().enumerate() {
         let Some(name) = scene.material_name(t).map(str::to_string) else {
             continue;
         };
@@ -655,7 +655,7 @@ pub(crate) fn apply_obj_textures(
             let Some(texture) = texture.as_ref() else {
                 continue;
             };
-            let Some(uv) = uvs[t] else {
+            let Some(uv) = uv_t else {
                 *missing_uv.entry(name.clone()).or_default() += 1;
                 continue;
             };

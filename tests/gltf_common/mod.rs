@@ -17,7 +17,7 @@ pub struct Doc {
 
 impl Doc {
     pub fn view(&mut self, bytes: &[u8]) -> usize {
-        while self.bin.len() % 4 != 0 {
+        while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
         self.views.push(json!({
@@ -102,11 +102,11 @@ impl Doc {
     /// The bytes of a `.glb` of this document.
     pub fn glb_bytes(&self, rest: Value) -> Vec<u8> {
         let mut text = serde_json::to_vec(&self.json(rest, false)).unwrap();
-        while text.len() % 4 != 0 {
+        while !text.len().is_multiple_of(4) {
             text.push(b' ');
         }
         let mut bin = self.bin.clone();
-        while bin.len() % 4 != 0 {
+        while !bin.len().is_multiple_of(4) {
             bin.push(0);
         }
         let total = 12 + 8 + text.len() + 8 + bin.len();

@@ -249,7 +249,7 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
     let memory_warning =
         antiradiance::solve::warnings::memory_warning(Some(relighter.prepared().memory()));
     if let Some(w) = &memory_warning {
-        crate::cli::driver::print_warning(&w);
+        crate::cli::driver::print_warning(w);
     }
 
     // The camera is resolved once, so every frame has the same view.

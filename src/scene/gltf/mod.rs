@@ -155,10 +155,10 @@ fn parse(path: &Path) -> Result<(gltf::Document, Option<Vec<u8>>)> {
         check_glb(path, &bytes)?;
     } else if bytes.iter().take(64).all(|b| b.is_ascii_whitespace()) {
         return Err(scene_err(path, "empty file"));
-    } else if !bytes
+    } else if bytes
         .iter()
         .find(|b| !b.is_ascii_whitespace())
-        .is_some_and(|&b| b == b'{')
+        .is_none_or(|&b| b != b'{')
     {
         return Err(scene_err(
             path,

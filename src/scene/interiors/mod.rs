@@ -180,6 +180,10 @@ fn wall_with_openings(
     );
 }
 
+/// A window wall's openings: (sill, head) heights, the openings' x ranges, and the panes'
+/// material when they are closed.
+type Window<'a> = ((f64, f64), &'a [(f64, f64)], Option<Material>);
+
 /// The shell of a `w x h x d` room from the origin (floor y = 0, window wall z = 0): what
 /// [`Cad::big_rectangle`] makes of the floor, the ceiling (one polygon per x range of
 /// `ceiling`), the window wall ([`wall_with_openings`]), the back wall and the two side walls,
@@ -190,7 +194,7 @@ struct Shell<'a> {
     ceiling: &'a [(f64, f64)],
     /// The window wall's openings (x ranges) from y = sill to head, closed by panes of
     /// `pane` when given.
-    window: ((f64, f64), &'a [(f64, f64)], Option<Material>),
+    window: Window<'a>,
 }
 
 impl Shell<'_> {

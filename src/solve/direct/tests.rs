@@ -1,4 +1,4 @@
-mod tests {
+mod group_tests {
     use super::super::*;
     use crate::mesh::build_patches;
     use crate::scene::generated;

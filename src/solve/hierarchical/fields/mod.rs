@@ -122,7 +122,7 @@ impl Fields {
             ..Fields::default()
         };
         let mut field_of = vec![NONE; nodes];
-        for i in 0..nodes {
+        for (i, field) in field_of.iter_mut().enumerate() {
             let (a, b) = (
                 links.cluster_start[i] as usize,
                 links.cluster_start[i + 1] as usize,
@@ -130,7 +130,7 @@ impl Fields {
             let near = keyed[a..b].iter().take_while(|(k, _)| *k == NEAR).count();
             fields.near_end.push((a + near) as u32);
             if a + near < b {
-                field_of[i] = fields.node.len() as u32;
+                *field = fields.node.len() as u32;
                 fields.add_field(
                     i,
                     prepared.tree.nodes[i].centroid,
