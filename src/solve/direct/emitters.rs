@@ -113,6 +113,10 @@ pub(super) struct EmitterGroup {
     /// Cumulative area fraction of the members, in member order (last entry exactly 1): a
     /// shadow ray's member is chosen by area, so its point is uniform over the group.
     pub(super) member_cdf: Vec<f64>,
+    /// Per bucket `b` of `[b / G, (b + 1) / G)` (`G` its length, the member count), the first
+    /// member whose cumulative fraction exceeds `b / G`: [`EmitterGroup::pick`] scans on from
+    /// there instead of bisecting the whole list (the same answer, found in a step or two).
+    pub(super) member_guide: Vec<u32>,
 }
 
 impl EmitterGroup {
@@ -127,8 +131,36 @@ impl EmitterGroup {
 
     /// The member (index into [`Emitters`]) whose cumulative area interval holds `u` in [0, 1).
     pub(super) fn pick(&self, u: f64) -> usize {
-        self.members[interval_of(&self.member_cdf, u)] as usize
+        self.members[guided_interval(&self.member_cdf, &self.member_guide, u)] as usize
     }
+}
+
+/// The guide of `cdf` (non-decreasing): per bucket `b` of `cdf.len()` equal buckets of [0, 1),
+/// the first entry above `b / cdf.len()`.
+fn guide_of(cdf: &[f64]) -> Vec<u32> {
+    let g = cdf.len();
+    (0..g)
+        .map(|b| cdf.partition_point(|&c| c <= b as f64 / g as f64) as u32)
+        .collect()
+}
+
+/// [`interval_of`] `(cdf, u)` through `guide` ([`guide_of`] of `cdf`): from the first entry
+/// above the start of `u`'s bucket, on to the first entry above `u`. Exactly `interval_of`'s
+/// answer; should rounding put the bucket's start above `u`, it bisects instead.
+fn guided_interval(cdf: &[f64], guide: &[u32], u: f64) -> usize {
+    let g = guide.len();
+    let b = ((u * g as f64) as usize).min(g.saturating_sub(1));
+    let Some(&start) = guide.get(b) else {
+        return interval_of(cdf, u);
+    };
+    let mut i = start as usize;
+    if i > 0 && cdf.get(i - 1).is_some_and(|&c| c > u) {
+        return interval_of(cdf, u);
+    }
+    while i < cdf.len() && cdf[i] <= u {
+        i += 1;
+    }
+    i.min(cdf.len().saturating_sub(1))
 }
 
 /// Largest normal spread, and thickness relative to the radius, of a planar group (see
@@ -251,6 +283,7 @@ fn build_group(emitters: &Emitters, members: Vec<u32>) -> EmitterGroup {
         .map(|&m| (emitters.geom[m as usize].normal - normal).length())
         .fold(0.0, f64::max);
     let member_cdf = cumulative(members.iter().map(|&m| emitters.geom[m as usize].area));
+    let member_guide = guide_of(&member_cdf);
     let (neighbours, manifold) = edge_neighbours(emitters, &members);
     let tree = MemberTree::new(emitters, &members, &neighbours);
     let boundary = merge_collinear(boundary);
@@ -262,6 +295,7 @@ fn build_group(emitters: &Emitters, members: Vec<u32>) -> EmitterGroup {
         manifold,
         area,
         member_cdf,
+        member_guide,
         members,
         boundary,
         normal,
@@ -364,4 +398,45 @@ fn edge_neighbours(emitters: &Emitters, members: &[u32]) -> (Vec<[u32; 3]>, bool
         })
         .collect();
     (neighbours, manifold)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The guided search gives bisection's answer for every `u`, at bucket starts, just below
+    /// and above them, and at random, on area lists with zero areas, equal areas and one huge
+    /// member.
+    #[test]
+    fn guided_interval_is_the_bisection() {
+        let lists: [Vec<f64>; 4] = [
+            vec![1.0],
+            vec![1.0, 0.0, 0.0, 2.0, 1.0],
+            vec![1.0; 7],
+            (0..40)
+                .map(|i| if i == 17 { 1e6 } else { 1.0 + i as f64 * 0.1 })
+                .collect(),
+        ];
+        let mut rng = crate::geometry::sampling::Rng::new(7, 0);
+        for areas in &lists {
+            let cdf = cumulative(areas.iter().copied());
+            let guide = guide_of(&cdf);
+            let g = cdf.len() as f64;
+            let mut us: Vec<f64> = (0..cdf.len())
+                .flat_map(|b| {
+                    let t = b as f64 / g;
+                    [t, t.next_down().max(0.0), t.next_up()]
+                })
+                .collect();
+            us.extend(cdf.iter().flat_map(|&c| [c, c.next_down(), c.next_up()]));
+            us.extend((0..1000).map(|_| rng.next_f64()));
+            for u in us.into_iter().filter(|u| (0.0..1.0).contains(u)) {
+                assert_eq!(
+                    guided_interval(&cdf, &guide, u),
+                    interval_of(&cdf, u),
+                    "u = {u}, cdf = {cdf:?}"
+                );
+            }
+        }
+    }
 }
