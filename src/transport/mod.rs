@@ -287,27 +287,18 @@ impl Spread {
         bins: &Bins,
         params: &CouplingParams,
     ) {
-        let spread = self;
-        spread.front.clear();
-        spread.back.clear();
+        self.front.clear();
+        self.back.clear();
         for (part, &omega) in front.iter().zip(&front_omega) {
-            spread_part(x, n_x, (part, omega), true, bins, params, &mut spread.front);
+            spread_part(x, n_x, (part, omega), true, bins, params, &mut self.front);
         }
         if receiver_back {
             for part in back.triangles() {
                 let omega = geometry::solid_angle(x, &part);
-                spread_part(
-                    x,
-                    n_x,
-                    (&part, omega),
-                    false,
-                    bins,
-                    params,
-                    &mut spread.back,
-                );
+                spread_part(x, n_x, (&part, omega), false, bins, params, &mut self.back);
             }
         }
-        for list in [&mut spread.front, &mut spread.back] {
+        for list in [&mut self.front, &mut self.back] {
             let f_total: f64 = list.iter().map(|e| e.1).sum();
             let w_total: f64 = list.iter().map(|e| e.2).sum();
             for e in list.iter_mut() {

@@ -102,13 +102,10 @@ impl LiveBins {
                     *word &= r;
                 }
             });
-        let mut start = Vec::with_capacity(n + 1);
-        let mut total = 0u32;
-        start.push(0);
-        for m in mask.chunks(words.max(1)) {
-            total += m.iter().map(|w| w.count_ones()).sum::<u32>();
-            start.push(total);
-        }
+        let mut start = starts_of(
+            mask.chunks(words.max(1))
+                .map(|m| m.iter().map(|w| w.count_ones()).sum::<u32>()),
+        );
         start.truncate(n + 1);
         LiveBins { words, mask, start }
     }

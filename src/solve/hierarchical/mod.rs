@@ -626,6 +626,21 @@ fn rgb_of<const C: usize>(x: [f64; C]) -> [f64; 3] {
     std::array::from_fn(|c| x[c % C])
 }
 
+/// The starts of consecutive pieces of lengths `counts`, and the end of the last: `start[0] =
+/// 0`, `start[i + 1] = start[i] + counts[i]` (the layout [`split_by_start`] splits by).
+fn starts_of<T: Copy + Default + std::ops::Add<Output = T>>(
+    counts: impl ExactSizeIterator<Item = T>,
+) -> Vec<T> {
+    let mut start = Vec::with_capacity(counts.len() + 1);
+    let mut total = T::default();
+    start.push(total);
+    for c in counts {
+        total = total + c;
+        start.push(total);
+    }
+    start
+}
+
 /// Splits `data` into consecutive pieces of lengths `start[i + 1] - start[i]`.
 fn split_by_start<'a, T, I: Copy + Into<u64>>(
     mut data: &'a mut [T],

@@ -47,13 +47,7 @@ impl PairCache {
         if bytes > budget {
             return Err(bytes);
         }
-        let mut start = Vec::with_capacity(n + 1);
-        let mut sum = 0u64;
-        start.push(sum);
-        for &c in &counts {
-            sum += c as u64;
-            start.push(sum);
-        }
+        let start = starts_of(counts.iter().map(|&c| c as u64));
         let mut factor = vec![[0.0f32; 2]; total];
         let ctx = prepared.sweep_context();
         split_by_start(&mut factor, &start)

@@ -212,14 +212,8 @@ impl Fields {
             .into_par_iter()
             .map(|e| self.path(e).count() as u32)
             .collect();
-        let mut start = Vec::with_capacity(n + 1);
-        let mut total = 0u32;
-        start.push(total);
-        for c in &counts {
-            total += c;
-            start.push(total);
-        }
-        self.evaluations = total as u64;
+        let start = starts_of(counts.into_iter());
+        self.evaluations = start.last().map_or(0, |&total| total as u64);
         let mut slab = vec![0u8; self.evaluations as usize];
         split_by_start(&mut slab, &start)
             .into_par_iter()
