@@ -51,6 +51,11 @@ pub struct CouplingParams {
     /// Largest share of a bin's solid angle one sender piece may have before it is split further;
     /// smaller spreads near senders more finely over bins. Default 0.5.
     pub piece_fraction: f64,
+    /// Most times a sender piece that still covers more than `piece_fraction` of a bin, once
+    /// the part is cut into the most pieces at once, is cut in four again (see
+    /// [`refine_piece`]); 0 keeps the pieces as cut. Default 16; faint pairs take 0
+    /// (`hierarchy::links::exact`).
+    pub piece_depth: u32,
 }
 
 impl CouplingParams {
@@ -61,6 +66,7 @@ impl CouplingParams {
         two_sided: false,
         near_quadrature: 4,
         piece_fraction: 0.5,
+        piece_depth: 16,
     };
 }
 
@@ -226,8 +232,17 @@ fn spread_part(
         if !(w > 0.0) {
             return;
         }
-        if m == MAX_PIECES_PER_SIDE && w > limit {
-            refine_piece(x, n_x, (piece, w), with_ff, bins, limit, PIECE_DEPTH, acc);
+        if m == MAX_PIECES_PER_SIDE && w > limit && params.piece_depth > 0 {
+            refine_piece(
+                x,
+                n_x,
+                (piece, w),
+                with_ff,
+                bins,
+                limit,
+                params.piece_depth,
+                acc,
+            );
             return;
         }
         let to_piece = geometry::centroid(piece) - x;
@@ -274,11 +289,6 @@ fn spread_part(
 
 /// Most pieces per side a sender part is cut into at once ([`spread_part`]).
 const MAX_PIECES_PER_SIDE: usize = 8;
-
-/// Most times [`refine_piece`] halves a piece that still covers more than its share of a bin:
-/// pieces down to 2^-16 of the part's size, enough for a sender 1e-5 of its size away (a rug
-/// on a floor).
-const PIECE_DEPTH: u32 = 16;
 
 /// Adds one piece of a sender part (solid angle `w` at `x`) to `acc` by the direction of its
 /// centroid, first cutting it in four, `depth` times at most, while it covers more than `limit`

@@ -148,6 +148,12 @@ pub(super) fn couple_exact(
         .iter()
         .map(|&node| tree.nodes[node as usize].two_sided)
         .collect();
+    // Faint pairs carry too little light for their nearest pieces to be cut finer over bins
+    // (b90_office: couplings 9.3 -> 15.0 s when they were, 4.09% -> 2.88% either way).
+    let faint_coupling = CouplingParams {
+        piece_depth: 0,
+        ..*coupling
+    };
     let rows: Vec<Row> = (0..n_elements)
         .into_par_iter()
         .map_init(Coupling::new, |scratch, r| {
@@ -185,7 +191,8 @@ pub(super) fn couple_exact(
                     _ => &near,
                 };
                 row.points += receiver.points_for(&geoms[s as usize]) as u64;
-                couple(receiver, &geoms[s as usize], bins, coupling, scratch);
+                let params = if f { &faint_coupling } else { coupling };
+                couple(receiver, &geoms[s as usize], bins, params, scratch);
                 if scratch.is_empty() && !two_sided[s as usize] && receiver_back.is_none() {
                     row.empty.push(s);
                     continue;
@@ -197,7 +204,7 @@ pub(super) fn couple_exact(
                         (receiver, receiver_back.as_ref()),
                         (s, &geoms[s as usize], two_sided[s as usize]),
                         bins,
-                        coupling,
+                        params,
                         scratch,
                         &mut row,
                     );
