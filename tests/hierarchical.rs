@@ -361,3 +361,54 @@ fn faint_pairs_take_at_most_two_by_two_points() {
         "the cube added {added_points} points for {added_pairs} exact pairs"
     );
 }
+
+/// A field of grit on the Cornell box's floor: 10 x 10 cubes of 4 mm, 5 mm apart. Their pairs
+/// with one another are faint and their bounding spheres overlap, so by default they are
+/// refined down to exact couplings between their faces; with `faint_links` each such pair is
+/// one cluster link where it is first found faint. Every element pair is still covered exactly
+/// once, the exact pairs fall by a quarter or more, and the box's own triangles move by under 1%.
+#[test]
+fn faint_links_couple_grit_as_clusters() {
+    use antiradiance::scene::generated::push_cube;
+    let mut scene = generated::cornell_box();
+    for i in 0..10 {
+        for k in 0..10 {
+            let at = glam::DVec3::new(150.0 + 5.0 * i as f64, 0.0, 120.0 + 5.0 * k as f64);
+            push_cube(&mut scene, at, 4.0, 0.5);
+        }
+    }
+    let patches = build_patches(&scene, None);
+    let solve = |faint_links: bool| {
+        let options = SolverOptions {
+            faint_links,
+            ..SolverOptions::default()
+        };
+        let prepared = Prepared::new(&patches, &options, true).unwrap();
+        links::validate(&prepared.tree, &prepared.links).unwrap();
+        let stats = (prepared.links.stats.clone(), prepared.links.len());
+        let solution = solve_hierarchical(&patches, &options, &Progress::hidden()).unwrap();
+        (stats, solution)
+    };
+    let ((exact, exact_links), exact_solution) = solve(false);
+    let ((linked, linked_links), linked_solution) = solve(true);
+    eprintln!(
+        "exact pairs {} -> {}, links {} -> {}",
+        exact.exact_pairs, linked.exact_pairs, exact_links, linked_links
+    );
+    assert!(
+        4 * linked.exact_pairs < 3 * exact.exact_pairs,
+        "faint links left {} of {} exact pairs",
+        linked.exact_pairs,
+        exact.exact_pairs
+    );
+    let boxed = build_patches(&generated::cornell_box(), None);
+    let err = error_of(
+        &boxed,
+        &linked_solution.patch_radiance[..boxed.len()],
+        &exact_solution.patch_radiance[..boxed.len()],
+    );
+    eprintln!("the box's triangles, faint links against exact: {err:.5}");
+    // Measured 0.63%: the floor under the grit 1.3% and 1.9% brighter (its two triangles),
+    // the grit's blocking taken from its clusters' centroids.
+    assert!(err < 0.01, "faint links moved the box by {err}");
+}

@@ -9,6 +9,7 @@ const FLAGS: &[(&str, &str)] = &[
     ("SolverOptions::split_depth", "--split-depth"),
     ("SolverOptions::epsilon", "--epsilon"),
     ("SolverOptions::flux_share", "--flux-share"),
+    ("SolverOptions::faint_links", "--faint-links"),
     ("SolverOptions::field_ratio", "--field-ratio"),
     ("SolverOptions::bins", "--bins"),
     ("SolverOptions::tol", "--tol"),

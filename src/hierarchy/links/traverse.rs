@@ -266,26 +266,7 @@ impl Traversal<'_> {
                 || (leaf_pair && small(most_solid_angle(rn, sn), most_solid_angle(sn, rn)))
                 || (rn.area * flux_s).min(sn.area * flux_r) <= self.flux_limit
             {
-                // Receivers evaluate a cluster link at their elements' centroids with the
-                // direction from the sender's centroid, and (front-only) take nothing that
-                // arrives at their back: a link whose sender centroid lies behind every plane
-                // below the receiver adds exactly nothing. Such links are dropped (as culled).
-                if !coupling.two_sided
-                    && !rn.blocks_back
-                    && tree.point_behind_all(
-                        sn.centroid,
-                        r,
-                        crate::geometry::plane_tol(sn.radius + rn.radius),
-                        16,
-                    )
-                {
-                    found.stats.silent_links += 1;
-                    if self.record_culled {
-                        found.culled.push((s, r));
-                    }
-                    return;
-                }
-                found.cluster.push(u64::from(r) << 32 | u64::from(s));
+                self.link((s, r), found);
                 return;
             }
         }
@@ -299,6 +280,12 @@ impl Traversal<'_> {
         // pieces shrink by different factors (a sliver's by more than 2) cannot split each
         // other in turn down to the resolution floor.
         let faint = self.faint(sn, rn);
+        // Spheres apart, the flux rule above has decided; overlapping, a faint pair is one link
+        // when asked ([`LinkParams::faint_links`]).
+        if faint && params.faint_links && params.epsilon > 0.0 && gap <= 0.0 {
+            self.link((s, r), found);
+            return;
+        }
         let leaf_splittable = |n: &crate::hierarchy::Node, other: &crate::hierarchy::Node| {
             params.epsilon > 0.0
                 && !faint
@@ -323,6 +310,32 @@ impl Traversal<'_> {
             return;
         }
         split_pair(tree, (s, r), split_s, push);
+    }
+
+    /// Records the cluster link from `s` to `r`, unless it is silent. Receivers evaluate a
+    /// cluster link at their elements' centroids with the direction from the sender's
+    /// centroid, and (front-only) take nothing that arrives at their back: a link whose sender
+    /// centroid lies behind every plane below the receiver adds exactly nothing. Such links are
+    /// dropped (as culled).
+    fn link(&self, (s, r): (u32, u32), found: &mut Found) {
+        let (tree, coupling) = (self.tree, self.coupling);
+        let (sn, rn) = (&tree.nodes[s as usize], &tree.nodes[r as usize]);
+        if !coupling.two_sided
+            && !rn.blocks_back
+            && tree.point_behind_all(
+                sn.centroid,
+                r,
+                crate::geometry::plane_tol(sn.radius + rn.radius),
+                16,
+            )
+        {
+            found.stats.silent_links += 1;
+            if self.record_culled {
+                found.culled.push((s, r));
+            }
+            return;
+        }
+        found.cluster.push(u64::from(r) << 32 | u64::from(s));
     }
 
     /// [`faint`] with this traversal's limit.

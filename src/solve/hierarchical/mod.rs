@@ -221,6 +221,7 @@ pub fn link_params(options: &SolverOptions) -> LinkParams {
         epsilon: options.epsilon,
         max_split_depth: options.split_depth,
         flux_share: options.flux_share,
+        faint_links: options.faint_links,
         ..LinkParams::default()
     }
 }
