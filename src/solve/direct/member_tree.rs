@@ -164,7 +164,8 @@ impl MemberTree {
     /// each node reached and returns whether to go on into its children (a leaf's members are
     /// the visitor's to take, through [`Self::members`]).
     pub(super) fn walk(&self, root: u32, mut visit: impl FnMut(u32, &MemberNode) -> bool) {
-        let mut stack = vec![root];
+        // On the stack: a walk per receiver and emitter group, each allocating, was measurable.
+        let mut stack: smallvec::SmallVec<[u32; 64]> = smallvec::smallvec![root];
         while let Some(n) = stack.pop() {
             let node = &self.nodes[n as usize];
             if visit(n, node) && !node.is_leaf() {
