@@ -53,7 +53,7 @@ pub struct CouplingParams {
     pub piece_fraction: f64,
     /// Most times a sender piece that still covers more than `piece_fraction` of a bin, once
     /// the part is cut into the most pieces at once, is cut in four again (see
-    /// [`refine_piece`]); 0 keeps the pieces as cut. Default 16; faint pairs take 0
+    /// `refine_piece`); 0 keeps the pieces as cut. Default 16; faint pairs take 0
     /// (`hierarchy::links::exact`).
     pub piece_depth: u32,
 }

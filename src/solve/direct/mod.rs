@@ -86,7 +86,7 @@ pub const MAX_SHADOW_RAYS: u64 = 8_000_000;
 pub const MIN_SHADOW_SAMPLES: usize = 16;
 
 /// Shadow samples per receiving element that the budget may not go below while the pass stays
-/// within [`MAX_SHADOW_RAYS`] (a square). The pilot ([`PILOT_SAMPLES`]) stops wholly lit and
+/// within [`MAX_SHADOW_RAYS`] (a square). The pilot (`PILOT_SAMPLES`, 16 rays) stops wholly lit and
 /// wholly shadowed receivers first, so the floor costs rays in penumbrae only. Each emitter
 /// group takes the visible fraction of its own samples (a ratio estimator whose bias and noise
 /// fall as 1 / samples per group), and a receiver in a penumbra is noisy at 16: against
