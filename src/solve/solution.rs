@@ -8,6 +8,20 @@ use crate::mesh::closed::Outward;
 use crate::mesh::Patches;
 use crate::solve::health::{self, FailureKind, SolveFailure};
 
+/// What one exact direct-light pass cost ([`crate::solve::direct`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct DirectStats {
+    /// Receiving faces (elements' fronts, and the backs of two-sided ones).
+    pub receivers: u64,
+    /// Receivers some emitter lights before visibility (the others cost no ray).
+    pub lit_receivers: u64,
+    /// Shadow rays traced, pilot rays included.
+    pub shadow_rays: u64,
+    /// Lit receivers whose pilot rays all agreed (wholly lit or wholly in shadow), which took
+    /// no more rays.
+    pub settled_by_pilot: u64,
+}
+
 /// Convergence and health figures of one solve.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct SolveStats {
@@ -74,6 +88,10 @@ pub struct SolveStats {
     /// True when exact direct light was asked for but skipped: the scene's emitters would cost
     /// more than [`crate::solve::direct::DIRECT_LIGHT_BUDGET`] unoccluded form factors.
     pub direct_light_skipped: bool,
+    /// What the exact direct light cost (receivers, shadow rays); `None` when it was not
+    /// computed. Left out of the JSON when `None`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub direct: Option<DirectStats>,
     /// The hierarchical solver's links by kind, with the refinement's counts and times; `None`
     /// for the dense solver and the path tracer.
     pub link_stats: Option<LinkReport>,

@@ -62,6 +62,7 @@ use crate::geometry::{self, plane_tol, PLANE_EPS};
 use crate::mesh::Patches;
 use crate::progress::Progress;
 use crate::solve::hierarchical::Element;
+use crate::solve::solution::DirectStats;
 use crate::transport::{separation, PatchGeom, FAR_RATIO};
 
 /// Total shadow rays one direct-light pass aims at, spread over the receivers as
@@ -115,6 +116,17 @@ const PILOT_SAMPLES: usize = 16;
 
 /// Seed of the pilot pass's per-element streams.
 const PILOT_SEED: u64 = 0x5eed_d12e_c71d_0002;
+
+/// The shadow rays of one receiver ([`DirectStats`]'s parts).
+#[derive(Clone, Copy, Debug, Default)]
+struct Rays {
+    /// Some emitter lights the receiver (it went to the shadow rays).
+    lit: bool,
+    /// Rays traced, pilot included.
+    traced: u64,
+    /// The pilot's rays all agreed, and no more were traced.
+    settled: bool,
+}
 
 /// What one receiver's shadow rays found, per group of its lights.
 struct Pass {
@@ -247,7 +259,11 @@ impl<'a> DirectLight<'a> {
     /// Each receiver's `patch` must index `patches`; its corners, normal and area are in the unit
     /// frame (as [`crate::solve::hierarchical::Prepared::elements`] gives them). Runs in parallel over receivers; sets the
     /// progress message.
-    pub fn reflected(&self, receivers: &[Element], progress: &Progress) -> Vec<[f64; 3]> {
+    pub fn reflected(
+        &self,
+        receivers: &[Element],
+        progress: &Progress,
+    ) -> (Vec<[f64; 3]>, DirectStats) {
         progress.message(format!(
             "direct light: {} receivers x {} emitters, {} shadow rays each on average",
             receivers.len(),
@@ -296,28 +312,39 @@ impl<'a> DirectLight<'a> {
             let n = (share as usize).clamp(MIN_SHADOW_SAMPLES, MAX_SHADOW_SAMPLES);
             n.isqrt().pow(2)
         };
-        // 3. The visible part of it.
-        receivers
+        // 3. The visible part of it, with the rays each receiver took.
+        let visible: Vec<([f64; 3], Rays)> = receivers
             .par_iter()
             .zip(&unoccluded)
             .zip(&weight)
             .enumerate()
             .map(|(index, ((r, (lights, u)), &w))| {
                 if u.iter().all(|&x| x <= 0.0) {
-                    return [0.0; 3];
+                    return ([0.0; 3], Rays::default());
                 }
                 let rho = self.patches.albedo[r.patch as usize];
-                let visible = self.visible_light(r, index as u64, lights, samples_of(w));
-                [0, 1, 2].map(|c| {
+                let (visible, rays) = self.visible_light(r, index as u64, lights, samples_of(w));
+                let d = [0, 1, 2].map(|c| {
                     let d = rho[c] * visible[c];
                     if d.is_finite() {
                         d.max(0.0)
                     } else {
                         0.0
                     }
-                })
+                });
+                (d, rays)
             })
-            .collect()
+            .collect();
+        let mut stats = DirectStats {
+            receivers: receivers.len() as u64,
+            ..DirectStats::default()
+        };
+        for (_, rays) in &visible {
+            stats.lit_receivers += u64::from(rays.lit);
+            stats.shadow_rays += rays.traced;
+            stats.settled_by_pilot += u64::from(rays.settled);
+        }
+        (visible.into_iter().map(|(d, _)| d).collect(), stats)
     }
 
     /// True when `receivers` receivers would cost more than [`DIRECT_LIGHT_BUDGET`] unoccluded
@@ -736,7 +763,7 @@ impl<'a> DirectLight<'a> {
         index: u64,
         lights: &[GroupLight],
         samples: usize,
-    ) -> [f64; 3] {
+    ) -> ([f64; 3], Rays) {
         let emission = |l: &GroupLight| self.groups[l.group as usize].emission;
         let unoccluded = |l: &GroupLight| emission(l).map(|e| e * l.form_factor);
         // The distribution over the groups that light this receiver.
@@ -746,10 +773,11 @@ impl<'a> DirectLight<'a> {
         };
         let total: f64 = lights.iter().map(weight).sum();
         if lights.is_empty() || !(total > 0.0 && total.is_finite()) {
-            return lights.iter().fold([0.0; 3], |acc, l| {
+            let light = lights.iter().fold([0.0; 3], |acc, l| {
                 let u = unoccluded(l);
                 [0, 1, 2].map(|c| acc[c] + u[c])
             });
+            return (light, Rays::default());
         }
         let cdf = cumulative(lights.iter().map(weight));
         // A pilot of a quarter of the rays first; when they all agree (every ray that carries
@@ -758,19 +786,27 @@ impl<'a> DirectLight<'a> {
         // (A receiver with too few rays for a smaller pilot gets them all at once.)
         let pilot_n = (samples / 4).isqrt().pow(2).max(PILOT_SAMPLES);
         let full = || self.shadow_pass(r, index, lights, &cdf, samples, SEED);
+        let mut rays = Rays {
+            lit: true,
+            ..Rays::default()
+        };
         let Pass {
             arriving,
             visible,
             counts,
             ..
         } = if pilot_n >= samples {
+            rays.traced = samples as u64;
             full()
         } else {
             let pilot = self.shadow_pass(r, index, lights, &cdf, pilot_n, PILOT_SEED);
             let carried: usize = pilot.counts.iter().sum();
+            rays.traced = pilot_n as u64;
             if carried > 0 && (pilot.seen == 0 || pilot.seen == carried) {
+                rays.settled = true;
                 pilot
             } else {
+                rays.traced += samples as u64;
                 full()
             }
         };
@@ -795,7 +831,7 @@ impl<'a> DirectLight<'a> {
                 light[c] += u[c] * fraction;
             }
         }
-        light
+        (light, rays)
     }
 
     /// `n` shadow rays of the receiver (a square count), stream `seed`: per group of `lights`

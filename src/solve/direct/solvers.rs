@@ -137,7 +137,7 @@ pub fn solve_hierarchical_direct(
         return Ok(skip(prepared, None));
     }
     prepared.note_direct_light(bytes, receivers.len() as u64);
-    let mut source = direct.reflected(&receivers, progress);
+    let (mut source, direct_stats) = direct.reflected(&receivers, progress);
     // Only each receiver's patch and area are needed from here on (the receivers' corners
     // would take 112 MB through the sweeps of a 1M-triangle scene).
     let faces = faces_of(&receivers[..n]);
@@ -157,11 +157,13 @@ pub fn solve_hierarchical_direct(
     } else {
         add_emission(patches, &faces, state.radiance_back())
     };
+    let mut stats = without_negative_check(reflected.stats);
+    stats.direct = Some(direct_stats);
     Ok(finish_sides(
         patches,
         radiance,
         radiance_back,
-        without_negative_check(reflected.stats),
+        stats,
         options.clamp_negative,
         emission_bound(patches, options.antiradiance),
     ))
@@ -212,7 +214,7 @@ fn dense_direct_one_sided(
         drop(direct);
         return skip(None);
     }
-    let mut source = direct.reflected(&receivers, progress);
+    let (mut source, direct_stats) = direct.reflected(&receivers, progress);
     add_light_source(&patches.source, &receivers, &mut source);
     drop(direct);
     let mut with_source = patches.clone();
@@ -233,10 +235,12 @@ fn dense_direct_one_sided(
         .map(|r| reflected.patch_radiance[r.patch as usize].map(|x| x * inv_scale))
         .collect();
     let radiance = add_emission(patches, &faces_of(&receivers), &patch_reflected);
+    let mut stats = without_negative_check(reflected.stats);
+    stats.direct = Some(direct_stats);
     Ok(finish(
         patches,
         radiance,
-        without_negative_check(reflected.stats),
+        stats,
         options.clamp_negative,
         emission_bound(patches, options.antiradiance),
     ))

@@ -137,7 +137,7 @@ mod sampling_tests {
         let patches = build_patches(&scene, None);
         let receivers = patch_receivers(&patches);
         let light = DirectLight::new(&patches, receivers.len());
-        let reflected = light.reflected(&receivers, &Progress::hidden());
+        let (reflected, _) = light.reflected(&receivers, &Progress::hidden());
         let at = receivers.iter().position(|r| r.patch == 0).unwrap();
         reflected[at][0]
     }
@@ -196,5 +196,42 @@ mod budget_tests {
         let limit = (DIRECT_LIGHT_BUDGET / groups) as usize;
         assert!(!direct.over_budget(limit));
         assert!(direct.over_budget(limit + 1));
+    }
+}
+
+mod stats_tests {
+    use super::super::*;
+    use crate::mesh::build_patches;
+    use crate::scene::generated;
+
+    /// The occluder scene (a light, a plate, a floor split 12 x 12): every floor cell in the
+    /// umbra or fully lit is settled by its pilot, the penumbra's cells are not, and the counts
+    /// add up: every lit receiver traced at least its pilot, at most a pilot and a full pass.
+    #[test]
+    fn direct_stats_count_the_rays_of_the_occluder() {
+        let patches = build_patches(&generated::occluder_scene(), None);
+        let receivers = patch_receivers(&patches);
+        let light = DirectLight::new(&patches, receivers.len());
+        let (_, stats) = light.reflected(&receivers, &Progress::hidden());
+        assert_eq!(stats.receivers, receivers.len() as u64);
+        // The light (albedo 0) takes no ray; the plate's top and every floor cell are lit.
+        assert!(stats.lit_receivers > 0 && stats.lit_receivers < stats.receivers);
+        assert!(
+            stats.settled_by_pilot > 0 && stats.settled_by_pilot < stats.lit_receivers,
+            "{stats:?}"
+        );
+        let pilot = PILOT_SAMPLES as u64;
+        let most = (MAX_SHADOW_SAMPLES + MAX_SHADOW_SAMPLES / 4) as u64;
+        assert!(
+            stats.shadow_rays >= pilot * stats.lit_receivers,
+            "{stats:?}"
+        );
+        assert!(stats.shadow_rays <= most * stats.lit_receivers, "{stats:?}");
+        // Unsettled receivers traced a full pass beyond their pilot.
+        let unsettled = stats.lit_receivers - stats.settled_by_pilot;
+        assert!(
+            stats.shadow_rays
+                >= pilot * stats.lit_receivers + MIN_SHADOW_SAMPLES as u64 * unsettled
+        );
     }
 }
