@@ -117,11 +117,9 @@ const PILOT_SAMPLES: usize = 16;
 /// Seed of the pilot pass's per-element streams.
 const PILOT_SEED: u64 = 0x5eed_d12e_c71d_0002;
 
-/// The shadow rays of one receiver ([`DirectStats`]'s parts).
+/// The shadow rays of one receiver ([`DirectStats`]'s parts); none when no emitter lights it.
 #[derive(Clone, Copy, Debug, Default)]
 struct Rays {
-    /// Some emitter lights the receiver (it went to the shadow rays).
-    lit: bool,
     /// Rays traced, pilot included.
     traced: u64,
     /// The pilot's rays all agreed, and no more were traced.
@@ -313,7 +311,7 @@ impl<'a> DirectLight<'a> {
             n.isqrt().pow(2)
         };
         // 3. The visible part of it, with the rays each receiver took.
-        let visible: Vec<([f64; 3], Rays)> = receivers
+        let (reflected, rays): (Vec<[f64; 3]>, Vec<Rays>) = receivers
             .par_iter()
             .zip(&unoccluded)
             .zip(&weight)
@@ -334,17 +332,17 @@ impl<'a> DirectLight<'a> {
                 });
                 (d, rays)
             })
-            .collect();
+            .unzip();
         let mut stats = DirectStats {
             receivers: receivers.len() as u64,
             ..DirectStats::default()
         };
-        for (_, rays) in &visible {
-            stats.lit_receivers += u64::from(rays.lit);
-            stats.shadow_rays += rays.traced;
-            stats.settled_by_pilot += u64::from(rays.settled);
+        for r in &rays {
+            stats.lit_receivers += u64::from(r.traced > 0);
+            stats.shadow_rays += r.traced;
+            stats.settled_by_pilot += u64::from(r.settled);
         }
-        (visible.into_iter().map(|(d, _)| d).collect(), stats)
+        (reflected, stats)
     }
 
     /// True when `receivers` receivers would cost more than [`DIRECT_LIGHT_BUDGET`] unoccluded
@@ -786,10 +784,7 @@ impl<'a> DirectLight<'a> {
         // (A receiver with too few rays for a smaller pilot gets them all at once.)
         let pilot_n = (samples / 4).isqrt().pow(2).max(PILOT_SAMPLES);
         let full = || self.shadow_pass(r, index, lights, &cdf, samples, SEED);
-        let mut rays = Rays {
-            lit: true,
-            ..Rays::default()
-        };
+        let mut rays = Rays::default();
         let Pass {
             arriving,
             visible,
