@@ -269,10 +269,10 @@ const MAX_PIECES_PER_SIDE: usize = 8;
 
 /// Adds one piece of a sender part (solid angle `w` at `x`) to `acc` by the direction of its
 /// centroid, first cutting it in four, `depth` times at most (0: as it is), while it covers
-/// more than `limit`
-/// (steradians): a part cut into the most pieces per side at once can still hold, right beside
-/// `x`, one piece with most of the part's solid angle, whose centroid points elsewhere (a rug
-/// 0.76 mm above a 4.6 m floor put the whole hemisphere the floor sees of it in grazing bins).
+/// more than `limit` (steradians): a part cut into the most pieces per side at once can still
+/// hold, right beside `x`, one piece with most of the part's solid angle, whose centroid points
+/// elsewhere (a rug 0.76 mm above a 4.6 m floor put the whole hemisphere the floor sees of it
+/// in grazing bins).
 #[allow(clippy::too_many_arguments)]
 fn refine_piece(
     x: DVec3,
