@@ -248,53 +248,79 @@ impl SenderGroups {
         group_a: &mut [[f64; C]],
     ) {
         // group_a is bin-major: bin b of group g at b * ng + g, so the groups of one node in
-        // one bin (what a link's pull reads) are side by side.
+        // one bin (what a link's pull reads) are side by side. Its bins are summed in parallel,
+        // a block of rows per task (each task reads every element's mask and takes the bins in
+        // its block); every sum is formed in the same order as one pass would, so the result
+        // does not depend on the thread count.
         let ng = self.normal.len();
         debug_assert_eq!(group_a.len(), ng * nb);
-        group_b.fill([0.0; C]);
-        group_b_back.fill([0.0; C]);
-        group_a.fill([0.0; C]);
-        for (e, &g) in self.elem_group.iter().enumerate() {
-            if g == NONE {
-                continue;
-            }
-            let (g, a) = (g as usize, elem_area[e]);
-            for c in 0..C {
-                group_b[g][c] += a * radiance[e][c];
-            }
-            if let (Some(dst), Some(b)) = (group_b_back.get_mut(g), radiance_back.get(e)) {
+        let mut radiance_sums = || {
+            group_b.fill([0.0; C]);
+            group_b_back.fill([0.0; C]);
+            for (e, &g) in self.elem_group.iter().enumerate() {
+                if g == NONE {
+                    continue;
+                }
+                let (g, a) = (g as usize, elem_area[e]);
                 for c in 0..C {
-                    dst[c] += a * b[c];
+                    group_b[g][c] += a * radiance[e][c];
+                }
+                if let (Some(dst), Some(b)) = (group_b_back.get_mut(g), radiance_back.get(e)) {
+                    for c in 0..C {
+                        dst[c] += a * b[c];
+                    }
                 }
             }
-            let stored = &anti[live.start[e] as usize..live.start[e + 1] as usize];
-            for (bin, s) in live.bins_of(e).zip(stored) {
-                let dst = &mut group_a[bin * ng + g];
-                for c in 0..C {
-                    dst[c] += a * s[c] as f64;
-                }
-            }
-        }
-        // Children into parents; parents' groups come after their children's (post-order), so
-        // one pass in group order sums whole subtrees.
-        for &(g, p) in &self.child_parent {
-            let child = group_b[g as usize];
-            for (d, s) in group_b[p as usize].iter_mut().zip(child) {
-                *d += s;
-            }
-            if let Some(&child) = group_b_back.get(g as usize) {
-                for (d, s) in group_b_back[p as usize].iter_mut().zip(child) {
-                    *d += s;
-                }
-            }
-        }
-        for row in group_a.chunks_mut(ng.max(1)) {
+            // Children into parents; parents' groups come after their children's (post-order),
+            // so one pass in group order sums whole subtrees.
             for &(g, p) in &self.child_parent {
-                let child = row[g as usize];
-                for (d, s) in row[p as usize].iter_mut().zip(child) {
+                let child = group_b[g as usize];
+                for (d, s) in group_b[p as usize].iter_mut().zip(child) {
                     *d += s;
                 }
+                if let Some(&child) = group_b_back.get(g as usize) {
+                    for (d, s) in group_b_back[p as usize].iter_mut().zip(child) {
+                        *d += s;
+                    }
+                }
             }
+        };
+        if ng == 0 || nb == 0 {
+            radiance_sums();
+            return;
         }
+        let tasks = (2 * rayon::current_num_threads()).clamp(1, nb);
+        let rows_per_task = nb.div_ceil(tasks);
+        let anti_sums = || {
+            group_a
+                .par_chunks_mut(ng * rows_per_task)
+                .enumerate()
+                .for_each(|(task, rows)| {
+                    rows.fill([0.0; C]);
+                    let first_bin = task * rows_per_task;
+                    let end_bin = first_bin + rows.len() / ng;
+                    for (e, &g) in self.elem_group.iter().enumerate() {
+                        if g == NONE {
+                            continue;
+                        }
+                        let (g, a) = (g as usize, elem_area[e]);
+                        live.for_each_slot_in(e, first_bin..end_bin, |bin, slot| {
+                            let dst = &mut rows[(bin - first_bin) * ng + g];
+                            for c in 0..C {
+                                dst[c] += a * anti[slot][c] as f64;
+                            }
+                        });
+                    }
+                    for row in rows.chunks_mut(ng) {
+                        for &(g, p) in &self.child_parent {
+                            let child = row[g as usize];
+                            for (d, s) in row[p as usize].iter_mut().zip(child) {
+                                *d += s;
+                            }
+                        }
+                    }
+                });
+        };
+        rayon::join(radiance_sums, anti_sums);
     }
 }

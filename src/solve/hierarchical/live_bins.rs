@@ -132,6 +132,48 @@ impl LiveBins {
         Some(self.start[e] as usize + (below + (m[w] & ((1u64 << bit) - 1)).count_ones()) as usize)
     }
 
+    /// Calls `visit(bin, slot)` for each of element `e`'s stored bins in `bins`, increasing.
+    #[inline]
+    pub(super) fn for_each_slot_in(
+        &self,
+        e: usize,
+        bins: std::ops::Range<usize>,
+        mut visit: impl FnMut(usize, usize),
+    ) {
+        let mut slot = self.start[e] as usize;
+        for (k, &word) in self.mask[e * self.words..(e + 1) * self.words]
+            .iter()
+            .enumerate()
+        {
+            let (low, high) = (k * 64, k * 64 + 64);
+            if bins.end <= low {
+                break;
+            }
+            if bins.start >= high {
+                slot += word.count_ones() as usize;
+                continue;
+            }
+            // The bits of this word from `bins.start` on; those below count as slots before.
+            let from = bins.start.saturating_sub(low);
+            let below = if from == 0 {
+                0
+            } else {
+                word & ((1u64 << from) - 1)
+            };
+            slot += below.count_ones() as usize;
+            let mut w = word & !below;
+            while w != 0 {
+                let bit = w.trailing_zeros() as usize;
+                if low + bit >= bins.end {
+                    return;
+                }
+                visit(low + bit, slot);
+                slot += 1;
+                w &= w - 1;
+            }
+        }
+    }
+
     /// Element `e`'s stored bins, increasing (the order of its slots).
     pub(super) fn bins_of(&self, e: usize) -> impl Iterator<Item = usize> + '_ {
         self.mask[e * self.words..(e + 1) * self.words]
@@ -148,5 +190,49 @@ impl LiveBins {
                     Some(k * 64 + b)
                 })
             })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every block of bins visits exactly the element's stored bins in it, with the slots
+    /// `slot` gives them, across word boundaries (144 bins: three words per element).
+    #[test]
+    fn slots_in_a_block_of_bins_are_those_of_the_whole_mask() {
+        let nb = 144;
+        let mut live = LiveBins::empty(3, nb);
+        let words = live.words;
+        let mut rng = crate::geometry::sampling::Rng::new(7, 0);
+        for m in live.mask.iter_mut() {
+            *m = rng.below(u64::MAX) & rng.below(u64::MAX);
+        }
+        live.mask[words] = 0; // an element with no bins
+        live.start = starts_of(
+            live.mask
+                .chunks(words)
+                .map(|m| m.iter().map(|w| w.count_ones()).sum::<u32>()),
+        );
+        for e in 0..3 {
+            for (from, to) in [
+                (0, nb),
+                (0, 1),
+                (5, 70),
+                (63, 65),
+                (64, 128),
+                (100, nb),
+                (70, 70),
+            ] {
+                let mut seen = Vec::new();
+                live.for_each_slot_in(e, from..to, |bin, slot| seen.push((bin, slot)));
+                let expected: Vec<(usize, usize)> = live
+                    .bins_of(e)
+                    .filter(|b| (from..to).contains(b))
+                    .map(|b| (b, live.slot(e, b).expect("stored")))
+                    .collect();
+                assert_eq!(seen, expected, "element {e}, bins {from}..{to}");
+            }
+        }
     }
 }
