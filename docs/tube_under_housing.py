@@ -1,0 +1,88 @@
+#!/usr/bin/env python3
+"""Writes a small scene where antiradiance's bins show: one tube light right under its housing.
+
+Python 3 standard library only:
+
+    tube_under_housing.py OUT.obj      # also writes OUT.mtl beside it
+
+A closed 4 x 3 x 4 m room (albedo 0.7, facing in), a housing block 1.28 x 0.07 x 0.12 m
+(albedo 0.8) 10 cm under the ceiling, and under it, 14 mm below the housing, an emitting tube
+1.2 m long of radius 16 mm (16 sides, closed by fans; radiance 25, 25, 23) - the classroom's
+tube lights (`antiradiance scene classroom`) alone in a room. Metres, y up. The housing's
+underside, lit from 14 mm, is the brightest surface, and the tube blocks a wide part of the
+room's view of it: light that antiradiance must cancel through a blocker seen at grazing
+directions. docs/ARCHITECTURE.md ("Sender spread") has the figures.
+"""
+
+import math
+import os
+import sys
+
+
+def main(argv):
+    if len(argv) != 2:
+        sys.stderr.write(__doc__)
+        return 2
+    out = argv[1]
+    vertices, faces = [], []
+
+    def tri(a, b, c, material):
+        i = len(vertices)
+        vertices.extend([a, b, c])
+        faces.append((i, i + 1, i + 2, material))
+
+    def quad(a, b, c, d, material):
+        tri(a, b, c, material)
+        tri(a, c, d, material)
+
+    def block(lo, hi, material, inward=False):
+        (x0, y0, z0), (x1, y1, z1) = lo, hi
+        sides = [
+            ((x0, y0, z0), (x1, y0, z0), (x1, y0, z1), (x0, y0, z1)),
+            ((x0, y1, z0), (x0, y1, z1), (x1, y1, z1), (x1, y1, z0)),
+            ((x0, y0, z0), (x0, y0, z1), (x0, y1, z1), (x0, y1, z0)),
+            ((x1, y0, z0), (x1, y1, z0), (x1, y1, z1), (x1, y0, z1)),
+            ((x0, y0, z0), (x0, y1, z0), (x1, y1, z0), (x1, y0, z0)),
+            ((x0, y0, z1), (x1, y0, z1), (x1, y1, z1), (x0, y1, z1)),
+        ]
+        for q in sides:
+            quad(*((q[0], q[3], q[2], q[1]) if inward else q), material)
+
+    def tube(x0, y, z, length, radius, sides, material):
+        ring = [
+            (y + radius * math.cos(2 * math.pi * k / sides), z + radius * math.sin(2 * math.pi * k / sides))
+            for k in range(sides)
+        ]
+        for k in range(sides):
+            (ya, za), (yb, zb) = ring[k], ring[(k + 1) % sides]
+            quad((x0, ya, za), (x0, yb, zb), (x0 + length, yb, zb), (x0 + length, ya, za), material)
+        (y0, z0) = ring[0]
+        for k in range(1, sides - 1):
+            (ya, za), (yb, zb) = ring[k], ring[k + 1]
+            tri((x0, y0, z0), (x0, yb, zb), (x0, ya, za), material)
+            tri((x0 + length, y0, z0), (x0 + length, ya, za), (x0 + length, yb, zb), material)
+
+    block((0, 0, 0), (4, 3, 4), "wall", inward=True)
+    block((1.36, 2.83, 1.94), (2.64, 2.9, 2.06), "housing")
+    tube(1.4, 2.8, 2.0, 1.2, 0.016, 16, "tube")
+
+    mtl = os.path.splitext(out)[0] + ".mtl"
+    with open(mtl, "w") as f:
+        f.write("newmtl wall\nKd 0.7 0.7 0.7\n")
+        f.write("newmtl housing\nKd 0.8 0.8 0.8\n")
+        f.write("newmtl tube\nKd 0.5 0.5 0.5\nKe 25 25 23\n")
+    with open(out, "w") as f:
+        f.write(f"mtllib {os.path.basename(mtl)}\n")
+        for v in vertices:
+            f.write("v %.6f %.6f %.6f\n" % v)
+        current = None
+        for a, b, c, material in faces:
+            if material != current:
+                f.write(f"usemtl {material}\n")
+                current = material
+            f.write(f"f {a + 1} {b + 1} {c + 1}\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv))
