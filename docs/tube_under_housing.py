@@ -3,7 +3,8 @@
 
 Python 3 standard library only:
 
-    tube_under_housing.py OUT.obj      # also writes OUT.mtl beside it
+    tube_under_housing.py OUT.obj [--housing-albedo A] [--tube-albedo A]
+        writes OUT.obj and OUT.mtl beside it (albedos 0.8 and 0.5 unless given)
 
 A closed 4 x 3 x 4 m room (albedo 0.7, facing in), a housing block 1.28 x 0.07 x 0.12 m
 (albedo 0.8) 10 cm under the ceiling, and under it, 14 mm below the housing, an emitting tube
@@ -20,10 +21,15 @@ import sys
 
 
 def main(argv):
-    if len(argv) != 2:
+    args = argv[1:]
+    albedo = {"--housing-albedo": 0.8, "--tube-albedo": 0.5}
+    while len(args) >= 3 and args[-2] in albedo:
+        albedo[args[-2]] = float(args[-1])
+        args = args[:-2]
+    if len(args) != 1 or not all(0.0 <= a < 1.0 for a in albedo.values()):
         sys.stderr.write(__doc__)
         return 2
-    out = argv[1]
+    out = args[0]
     vertices, faces = [], []
 
     def tri(a, b, c, material):
@@ -69,8 +75,9 @@ def main(argv):
     mtl = os.path.splitext(out)[0] + ".mtl"
     with open(mtl, "w") as f:
         f.write("newmtl wall\nKd 0.7 0.7 0.7\n")
-        f.write("newmtl housing\nKd 0.8 0.8 0.8\n")
-        f.write("newmtl tube\nKd 0.5 0.5 0.5\nKe 25 25 23\n")
+        h, t = albedo["--housing-albedo"], albedo["--tube-albedo"]
+        f.write(f"newmtl housing\nKd {h} {h} {h}\n")
+        f.write(f"newmtl tube\nKd {t} {t} {t}\nKe 25 25 23\n")
     with open(out, "w") as f:
         f.write(f"mtllib {os.path.basename(mtl)}\n")
         for v in vertices:
