@@ -5,6 +5,10 @@ Python 3 standard library only:
 
     tube_under_housing.py OUT.obj [--housing-albedo A] [--tube-albedo A]
         writes OUT.obj and OUT.mtl beside it (albedos 0.8 and 0.5 unless given)
+    tube_under_housing.py OUT.obj --blocker yes|no
+        the same room with black walls, its floor (albedo 0.7) in 8 x 8 squares, the housing's
+        underside alone as the light (radiance 5) and, with `yes`, a closed black blocker
+        32 x 2.5 mm in section in the tube's place, 14 mm under it
 
 A closed 4 x 3 x 4 m room (albedo 0.7, facing in), a housing block 1.28 x 0.07 x 0.12 m
 (albedo 0.8) 10 cm under the ceiling, and under it, 14 mm below the housing, an emitting tube
@@ -23,8 +27,14 @@ import sys
 def main(argv):
     args = argv[1:]
     albedo = {"--housing-albedo": 0.8, "--tube-albedo": 0.5}
-    while len(args) >= 3 and args[-2] in albedo:
-        albedo[args[-2]] = float(args[-1])
+    blocker = None
+    while len(args) >= 3 and (args[-2] in albedo or args[-2] == "--blocker"):
+        if args[-2] == "--blocker":
+            if args[-1] not in ("yes", "no"):
+                break
+            blocker = args[-1] == "yes"
+        else:
+            albedo[args[-2]] = float(args[-1])
         args = args[:-2]
     if len(args) != 1 or not all(0.0 <= a < 1.0 for a in albedo.values()):
         sys.stderr.write(__doc__)
@@ -68,16 +78,34 @@ def main(argv):
             tri((x0, y0, z0), (x0, yb, zb), (x0, ya, za), material)
             tri((x0 + length, y0, z0), (x0 + length, ya, za), (x0 + length, yb, zb), material)
 
-    block((0, 0, 0), (4, 3, 4), "wall", inward=True)
-    block((1.36, 2.83, 1.94), (2.64, 2.9, 2.06), "housing")
-    tube(1.4, 2.8, 2.0, 1.2, 0.016, 16, "tube")
+    if blocker is None:
+        block((0, 0, 0), (4, 3, 4), "wall", inward=True)
+        block((1.36, 2.83, 1.94), (2.64, 2.9, 2.06), "housing")
+        tube(1.4, 2.8, 2.0, 1.2, 0.016, 16, "tube")
+        h, t = albedo["--housing-albedo"], albedo["--tube-albedo"]
+        materials = (
+            "newmtl wall\nKd 0.7 0.7 0.7\n"
+            f"newmtl housing\nKd {h} {h} {h}\n"
+            f"newmtl tube\nKd {t} {t} {t}\nKe 25 25 23\n"
+        )
+    else:
+        block((0, 0, 0), (4, 3, 4), "wall", inward=True)
+        del faces[:2]  # the floor, replaced by a grid
+        for i in range(8):
+            for j in range(8):
+                (x0, x1, z0, z1) = (i / 2, (i + 1) / 2, j / 2, (j + 1) / 2)
+                quad((x0, 0, z0), (x0, 0, z1), (x1, 0, z1), (x1, 0, z0), "floor")
+        quad((1.36, 2.83, 1.94), (2.64, 2.83, 1.94), (2.64, 2.83, 2.06), (1.36, 2.83, 2.06), "light")
+        if blocker:
+            block((1.4, 2.8135, 1.984), (2.6, 2.816, 2.016), "blocker")
+        materials = (
+            "newmtl wall\nKd 0 0 0\nnewmtl floor\nKd 0.7 0.7 0.7\n"
+            "newmtl light\nKd 0 0 0\nKe 5 5 5\nnewmtl blocker\nKd 0 0 0\n"
+        )
 
     mtl = os.path.splitext(out)[0] + ".mtl"
     with open(mtl, "w") as f:
-        f.write("newmtl wall\nKd 0.7 0.7 0.7\n")
-        h, t = albedo["--housing-albedo"], albedo["--tube-albedo"]
-        f.write(f"newmtl housing\nKd {h} {h} {h}\n")
-        f.write(f"newmtl tube\nKd {t} {t} {t}\nKe 25 25 23\n")
+        f.write(materials)
     with open(out, "w") as f:
         f.write(f"mtllib {os.path.basename(mtl)}\n")
         for v in vertices:

@@ -401,12 +401,12 @@ fn back_to_back_twins_of_the_cornell_box() {
 }
 
 /// A room with Venetian blinds, as given and with every triangle doubled by its reversed twin:
-/// the stacked slats (and their twins) make the unoccluded rows sum to 2.5 (5 doubled), and the
-/// plain sweeps of the dense solver diverge even on the one-sided blinds. Every solve must end
-/// within the bound or report its failure. Exact twins are merged into two-sided slats, which
-/// the hierarchical solvers converge on (the dense oracle solves them as the twins again, and
-/// its plain sweeps diverge as on the twins: reported); twins 1e-9 apart stay two one-sided
-/// surfaces, and at least one solver fails.
+/// the stacked slats (and their twins) make the unoccluded rows sum to 2.5 (5 doubled). Every
+/// solve must end within the bound or report its failure. Exact twins are merged into
+/// two-sided slats, which the hierarchical solvers converge on (the dense oracle solves them
+/// as the twins again, and its plain sweeps stop at the cap unconverged: reported); twins
+/// 1e-9 apart stay two one-sided surfaces, which the hierarchical solvers converge on with
+/// front-only antiradiance.
 #[test]
 fn back_to_back_twins_of_venetian_blinds() {
     let blinds = blinds_room(30);
@@ -421,12 +421,25 @@ fn back_to_back_twins_of_venetian_blinds() {
         !merged[0] && !merged[2],
         "the hierarchical solvers converge on the two-sided slats"
     );
+    // Twins 1e-9 apart stay two one-sided surfaces: every solve stays within the bound or
+    // reports its failure (`check_solution`), the hierarchical solvers converge with front-only
+    // antiradiance, and a solve that does neither stopped at the cap, unconverged.
     let twins = blinds.twinned_at(NEAR_TWIN_GAP).scene();
-    let mut failed = 0;
     for options in [front_only(), two_sided()] {
-        failed += failures(&check_all("blinds twins", &twins, &options));
+        for solver in SOLVERS {
+            let solution = solve_with(&twins, &options, solver);
+            let failed = check_solution("blinds twins", &twins, &solution, solver);
+            let st = &solution.stats;
+            assert!(
+                st.converged || failed || st.iterations == options.max_iterations,
+                "blinds twins [{}]: {st:?}",
+                solver.0
+            );
+            if solver.0.starts_with("hierarchical") && !options.two_sided {
+                assert!(st.converged, "blinds twins [{}]: {st:?}", solver.0);
+            }
+        }
     }
-    assert!(failed > 0, "the twin blinds diverge in some solver");
 }
 
 /// The twin blinds 1e-9 apart (two one-sided surfaces back to back at every slat face),
@@ -664,9 +677,12 @@ fn an_overflowed_change_is_not_zero() {
     assert_eq!(change_ratio(1.0, 4.0), 0.25);
 }
 
-/// On the command line a failed solve is one `error:` line naming the solver, the sweep, the
-/// largest B against its bound and the row sum, exit code 1, no CSV, PLY or PNG; the report is
-/// written, with `converged: false` and the failure.
+/// On the command line a failed solve is one `error:` line naming the solver, the sweep and
+/// the row sum, exit code 1, no CSV, PLY or PNG; the report is written, with `converged:
+/// false` and the failure. Unoccluded radiosity on the twin blinds fails (negative mass). The
+/// dense solver's plain sweeps on them stay within the bound without converging: they must
+/// end at the cap with its `warning:` line and `converged: false`, or fail as above, never
+/// pass for converged.
 #[test]
 fn diverging_solve_on_the_command_line_writes_no_result() {
     let dir = tempfile::tempdir().unwrap();
@@ -697,6 +713,24 @@ fn diverging_solve_on_the_command_line_writes_no_result() {
         let o = run(&args);
         let err = stderr(&o);
         println!("{flags:?}: {err}");
+        if flags.contains(&"--solver") && o.status.code() == Some(0) {
+            assert!(
+                err.contains("warning: the dense solver stopped at the iteration cap"),
+                "{err}"
+            );
+            let r: Value =
+                serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+            assert_eq!(r["stats"]["converged"], false, "{r}");
+            assert!(
+                r["stats"]["largest_b_over_bound"].as_f64().unwrap() <= 1.0,
+                "{r}"
+            );
+            // Its results are written, flagged as not converged.
+            for path in [&csv, &ply, &png, &report] {
+                std::fs::remove_file(path).unwrap();
+            }
+            continue;
+        }
         assert_eq!(o.status.code(), Some(1), "{err}");
         let errors: Vec<&str> = err.lines().filter(|l| l.starts_with("error:")).collect();
         assert_eq!(errors.len(), 1, "{err}");

@@ -105,6 +105,14 @@ fn refined_to_element_pairs_equals_dense() {
                 hier.stats.converged,
                 hier.stats.iterations
             );
+            // Relative to each value, or to 1e-4 of the scene's largest where antiradiance
+            // cancels nearly all of a patch's light: the hierarchical solver stores antiradiance
+            // in f32, so such a remainder carries the rounding of what it cancelled.
+            let largest = dense
+                .patch_radiance
+                .iter()
+                .flatten()
+                .fold(0.0f64, |m, x| m.max(x.abs()));
             for (p, (a, b)) in dense
                 .patch_radiance
                 .iter()
@@ -112,7 +120,7 @@ fn refined_to_element_pairs_equals_dense() {
                 .enumerate()
             {
                 for c in 0..3 {
-                    let scale = a[c].abs().max(1e-6);
+                    let scale = a[c].abs().max(1e-4 * largest).max(1e-6);
                     assert!(
                         (a[c] - b[c]).abs() <= 1e-5 * scale,
                         "{name} patch {p} channel {c}: dense {} hierarchical {}",
