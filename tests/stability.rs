@@ -397,56 +397,16 @@ fn the_stopping_rule_keeps_its_tolerance_beside_a_white_cavity() {
     let v = DVec3::new;
     let (lo, hi, top) = (0.3, 0.7, 0.35);
     // The cavity's inside: a floor and four walls facing in, open at the top.
-    cavity.quad(
-        [
-            v(lo, 0.01, lo),
-            v(lo, 0.01, hi),
-            v(hi, 0.01, hi),
-            v(hi, 0.01, lo),
-        ],
-        0.99,
-        0.0,
-    );
-    cavity.quad(
-        [
-            v(lo, 0.01, lo),
-            v(lo, top, lo),
-            v(lo, top, hi),
-            v(lo, 0.01, hi),
-        ],
-        0.99,
-        0.0,
-    );
-    cavity.quad(
-        [
-            v(hi, 0.01, lo),
-            v(hi, 0.01, hi),
-            v(hi, top, hi),
-            v(hi, top, lo),
-        ],
-        0.99,
-        0.0,
-    );
-    cavity.quad(
-        [
-            v(lo, 0.01, lo),
-            v(hi, 0.01, lo),
-            v(hi, top, lo),
-            v(lo, top, lo),
-        ],
-        0.99,
-        0.0,
-    );
-    cavity.quad(
-        [
-            v(lo, 0.01, hi),
-            v(lo, top, hi),
-            v(hi, top, hi),
-            v(hi, 0.01, hi),
-        ],
-        0.99,
-        0.0,
-    );
+    let (b, t) = (0.01, top);
+    for q in [
+        [v(lo, b, lo), v(lo, b, hi), v(hi, b, hi), v(hi, b, lo)],
+        [v(lo, b, lo), v(lo, t, lo), v(lo, t, hi), v(lo, b, hi)],
+        [v(hi, b, lo), v(hi, b, hi), v(hi, t, hi), v(hi, t, lo)],
+        [v(lo, b, lo), v(hi, b, lo), v(hi, t, lo), v(lo, t, lo)],
+        [v(lo, b, hi), v(lo, t, hi), v(hi, t, hi), v(hi, b, hi)],
+    ] {
+        cavity.quad(q, 0.99, 0.0);
+    }
     let mut bright = lit_box(1.0);
     for a in bright.albedo.iter_mut() {
         *a = [0.95; 3];

@@ -112,8 +112,9 @@ pub const DAMP_AFTER_STALLING: usize = 4;
 /// [`DAMP_AFTER_STALLING`] alone does not see it. b90_office with near senders spread over bins
 /// piece by piece (`transport::refine_piece`, faint pairs' too): new minima every 1 to 5
 /// sweeps from 1.1e-2 at sweep 12 to 2.0e-3 at sweep 36, damped after 41, 55 sweeps in all;
-/// with this rule damped after 14, 27 sweeps, the same answer (0.002% apart). A steady contraction, however slow (a
-/// plain sweep at high albedo), sets a new minimum every sweep and is not damped.
+/// with this rule damped after 14, 27 sweeps, the same answer (0.002% apart). A steady
+/// contraction, however slow (a plain sweep at high albedo), sets a new minimum every sweep
+/// and is not damped.
 pub const SLOW_WINDOW: usize = 6;
 
 /// See [`SLOW_WINDOW`]: the smallest change must fall below this fraction of what it was

@@ -268,11 +268,11 @@ fn spread_part(
 const MAX_PIECES_PER_SIDE: usize = 8;
 
 /// Adds one piece of a sender part (solid angle `w` at `x`) to `acc` by the direction of the
-/// centre of the spherical triangle it spans at `x`, first cutting it in four, `depth` times at most (0: as it is), while it covers
-/// more than `limit` (steradians): a part cut into the most pieces per side at once can still
-/// hold, right beside `x`, one piece with most of the part's solid angle, whose centroid points
-/// elsewhere (a rug 0.76 mm above a 4.6 m floor put the whole hemisphere the floor sees of it
-/// in grazing bins).
+/// centre of the spherical triangle it spans at `x`, first cutting it in four, `depth` times at
+/// most (0: as it is), while it covers more than `limit` (steradians): a part cut into the most
+/// pieces per side at once can still hold, right beside `x`, one piece with most of the part's
+/// solid angle, whose centroid points elsewhere (a rug 0.76 mm above a 4.6 m floor put the
+/// whole hemisphere the floor sees of it in grazing bins).
 #[allow(clippy::too_many_arguments)]
 fn refine_piece(
     x: DVec3,
@@ -293,7 +293,7 @@ fn refine_piece(
         // obliquely, most of a piece's solid angle lies on the side nearest x while its
         // centroid lies further out, so a near sender's pieces landed in bins too grazing, and
         // the per-bin cap ([`bin_share`]) cut what overflowed them. A blocker 14 mm under a
-        // bright plate kept 68% of the light it should stop (the floor beneath 11.7% too
+        // bright plate stopped 68% of the light it should (the floor beneath 11.7% too
         // bright); docs/ARCHITECTURE.md, "Sender spread".
         let to_piece = (piece[0] - x).normalize_or_zero()
             + (piece[1] - x).normalize_or_zero()

@@ -66,11 +66,11 @@ pub struct LinkParams {
     /// couplings between its elements. What is lost is the near field of small things among
     /// themselves (a chair's tessellated seat, a lamp's shade), evaluated from the sender's
     /// centroid. Off by default; on in the `fast` preset. Measured at the default preset:
-    /// b90_office 51.6 s, 3.45 GB, 2.90% from its path-traced reference -> 26.4 s, 1.31 GB,
-    /// 3.76% (34.4M -> 6.5M links); the generated classroom 7.1 s, 0.83 GB, 2.26% -> 6.2 s,
-    /// 0.64 GB, 2.37% (one run each). In the `fast` preset: b90_office 38.8 s, 2.25 GB,
-    /// 5.06% -> 10.5 s, 0.76 GB, 7.66%; the classroom 5.1 s, 0.60 GB, 12.8% -> 2.8 s,
-    /// 0.41 GB, 14.3%; the seed room unchanged (5.44%).
+    /// b90_office 56.3 s, 3.49 GB, 2.79% from its path-traced reference -> 24.9 s, 1.32 GB,
+    /// 3.79% (34.4M -> 6.5M links; one run each). Measured on an earlier build: the generated
+    /// classroom 7.1 s, 0.83 GB, 2.26% -> 6.2 s, 0.64 GB, 2.37%; in the `fast` preset
+    /// b90_office 38.8 s, 2.25 GB, 5.06% -> 10.5 s, 0.76 GB, 7.66%, the classroom 5.1 s,
+    /// 0.60 GB, 12.8% -> 2.8 s, 0.41 GB, 14.3%, the seed room unchanged (5.44%).
     pub faint_links: bool,
 }
 
