@@ -4,7 +4,7 @@
 use crate::geometry::tolerances::MAX_CONTRACTION;
 use crate::mesh::Patches;
 use crate::progress::Progress;
-use crate::solve::health::Guard;
+use crate::solve::health::{Damping, Guard};
 use crate::solve::solution::SolveStats;
 
 /// Tracks residuals across iterations and decides convergence.
@@ -211,7 +211,10 @@ pub fn start_damping(
     if !guard.wants_damping() {
         return false;
     }
-    stats.damped_after = Some(iteration);
+    match guard.damping() {
+        Damping::All => stats.radiance_damped_after = Some(iteration),
+        _ => stats.damped_after = Some(iteration),
+    }
     convergence.restart();
     true
 }
@@ -225,8 +228,10 @@ pub fn damp_if_damped<const N: usize>(
     (anti, previous_anti): (&mut [[f32; N]], &[[f32; N]]),
 ) {
     if guard.damped() {
-        crate::solve::health::damp(radiance, previous_radiance);
         crate::solve::health::damp(anti, previous_anti);
+    }
+    if guard.damping() == Damping::All {
+        crate::solve::health::damp(radiance, previous_radiance);
     }
 }
 

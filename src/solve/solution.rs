@@ -37,10 +37,15 @@ pub struct SolveStats {
     /// mixes of precomputed lights.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub sweep_changes: Vec<f64>,
-    /// The sweep after which the solver damped its sweeps because their change kept growing
-    /// ([`crate::solve::health::DAMPING`]); `None` when every sweep was plain.
+    /// The sweep after which the solver damped its sweeps' antiradiance because their change
+    /// kept growing or stalled ([`crate::solve::health::Damping`]); `None` when every sweep was
+    /// plain.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub damped_after: Option<usize>,
+    /// The sweep after which the solver damped its radiance as well, its damped sweeps having
+    /// stalled again ([`crate::solve::health::Damping::All`]); `None` when it did not.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub radiance_damped_after: Option<usize>,
     /// Area-weighted mass of negative radiance before clamping, relative to the positive mass:
     /// sum a_p max(0, -B_p,c) / sum a_p max(0, B_p,c), both sums over patches p and RGB
     /// channels c (one ratio, not a mean of per-channel ratios).

@@ -83,6 +83,7 @@ fn resumed<const C: usize>(
     stats.max_row_sum = r.max_row_sum;
     stats.extrapolations = r.extrapolations;
     stats.damped_after = r.damped_after;
+    stats.radiance_damped_after = r.radiance_damped_after;
     (r.sweeps + 1, kept)
 }
 
@@ -260,7 +261,7 @@ impl Prepared {
         flat: (&mut Vec<f64>, &mut Vec<f64>),
     ) -> bool {
         damp_if_damped(guard, (radiance, next_radiance), (anti, next_anti));
-        if guard.damped() {
+        if guard.damping() == Damping::All {
             crate::solve::health::damp(radiance_back, next_radiance_back);
         }
         self.mix_step(
@@ -742,6 +743,7 @@ impl Prepared {
             max_row_sum: solution.stats.max_row_sum,
             extrapolations: solution.stats.extrapolations,
             damped_after: solution.stats.damped_after,
+            radiance_damped_after: solution.stats.radiance_damped_after,
         };
         let state = ElementState {
             radiance: radiance_rgb,
