@@ -7,7 +7,8 @@ Python 3 standard library only. Used by docs/mesh_quality.sh; also usable on its
         prints the variant's difference from the original: the design note's error measure
         (area-weighted relative L1 over the original's non-emissive triangles, mean over the
         RGB channels whose original is not all zero), after mapping the variant's per-triangle
-        radiance back to the original triangles through the map.
+        radiance back to the original triangles through the map. With "-" for the map the
+        two CSVs are of the same triangles: the error of a solve against a reference.
 
     mesh_quality.py table RUNS.tsv
         prints one markdown table of the runs listed in RUNS.tsv (tab-separated, no header:
@@ -104,6 +105,10 @@ def difference(original_csv, variant_csv, map_csv):
     """The variant's difference from the original, mapped back through `map_csv`."""
     original = read_triangles(original_csv)
     variant = read_triangles(variant_csv)
+    if map_csv == "-":
+        if len(variant) != len(original):
+            raise ValueError(f"{variant_csv}: {len(variant)} triangles, {original_csv} has {len(original)}")
+        return relative_error(original, [b for _, _, b in variant])
     mapping = read_map(map_csv)
     return relative_error(original, map_back(mapping, len(original), variant))
 

@@ -67,6 +67,10 @@ pub struct Node {
     /// A leaf of a two-sided patch: both its faces emit and reflect
     /// ([`ClusterTree::mark_two_sided`]; false on clusters).
     pub two_sided: bool,
+    /// How much brighter than the scene's mean the brightest patch below may be, from an
+    /// estimate of its direct light ([`ClusterTree::mark_light`]): at least 1. The flux rule
+    /// weighs a sender's links by it ([`crate::hierarchy::links::LinkParams::flux_share`]).
+    pub light: f32,
     /// Largest height of `center` above the plane of any triangle below,
     /// `max_t (n_t . center - n_t . v_t)`: with the cone it bounds from above the height of any
     /// point above every triangle's plane (see [`ClusterTree::behind_all`]).
@@ -140,6 +144,7 @@ fn leaf_node(corners: Tri, patch: u32, parent: u32, split_depth: u8) -> Node {
         blocks_back: false,
         emits: false,
         two_sided: false,
+        light: 1.0,
         height: 0.0,
     }
 }
@@ -170,6 +175,7 @@ fn placeholder(corners: Tri, parent: u32) -> Node {
         blocks_back: false,
         emits: false,
         two_sided: false,
+        light: 1.0,
         height: 0.0,
     }
 }
@@ -690,6 +696,7 @@ impl ClusterTree {
         debug_assert!(node.is_leaf());
         let (patch, depth, corners) = (node.patch, node.split_depth, node.corners);
         let (blocks_back, emits, two_sided) = (node.blocks_back, node.emits, node.two_sided);
+        let light = node.light;
         let first = self.nodes.len() as u32;
         let pieces = geometry::split_in_pieces(&corners);
         for &piece in &pieces {
@@ -697,6 +704,7 @@ impl ClusterTree {
             leaf.blocks_back = blocks_back;
             leaf.emits = emits;
             leaf.two_sided = two_sided;
+            leaf.light = light;
             self.nodes.push(leaf);
         }
         let node = &mut self.nodes[i as usize];
@@ -804,6 +812,31 @@ impl ClusterTree {
                 if a == NONE || *flag(&mut self.nodes[a as usize]) {
                     break;
                 }
+            }
+        }
+    }
+
+    /// Sets every node's [`Node::light`]: a leaf's from `per_patch[p]`, its patch's brightness
+    /// over the scene's mean (values below 1, NaN and missing ones count 1), a cluster's the
+    /// largest of its leaves'.
+    pub fn mark_light(&mut self, per_patch: &[f32]) {
+        for n in &mut self.nodes {
+            let light = if n.is_leaf() {
+                per_patch.get(n.patch as usize).copied().unwrap_or(1.0)
+            } else {
+                1.0
+            };
+            n.light = if light > 1.0 { light } else { 1.0 };
+        }
+        for i in 0..self.nodes.len() {
+            let n = &self.nodes[i];
+            if !n.is_leaf() || n.light <= 1.0 {
+                continue;
+            }
+            let (light, mut a) = (n.light, n.parent);
+            while a != NONE && self.nodes[a as usize].light < light {
+                self.nodes[a as usize].light = light;
+                a = self.nodes[a as usize].parent;
             }
         }
     }
@@ -1029,5 +1062,38 @@ mod tests {
         }
         // The test is useful: on a sphere, far sides are behind each other.
         assert!(culled > 1000, "{culled}");
+    }
+
+    #[test]
+    fn a_cluster_is_as_bright_as_its_brightest_leaf_and_pieces_keep_their_patchs_light() {
+        let patches = build_patches(&curved_scene(), None);
+        let mut tree = ClusterTree::build(&patches);
+        let mut per_patch = vec![1.0f32; patches.len()];
+        per_patch[3] = 5.0;
+        per_patch[4] = f32::NAN;
+        per_patch[5] = 0.5;
+        tree.mark_light(&per_patch);
+        let leaf_of = |tree: &ClusterTree, p: u32| {
+            (0..tree.nodes.len()).find(|&i| tree.nodes[i].is_leaf() && tree.nodes[i].patch == p)
+        };
+        let bright = leaf_of(&tree, 3).expect("patch 3 has a leaf");
+        assert_eq!(tree.nodes[bright].light, 5.0);
+        assert_eq!(tree.nodes[0].light, 5.0, "the root holds patch 3");
+        for p in [4, 5, 6] {
+            let leaf = leaf_of(&tree, p).expect("a leaf");
+            assert_eq!(tree.nodes[leaf].light, 1.0, "patch {p}");
+        }
+        // Every cluster: the largest of its children's, and at least 1.
+        for n in tree.nodes.iter().filter(|n| !n.is_leaf()) {
+            let children = n.first_child as usize..n.first_child as usize + n.child_count as usize;
+            let most = children.map(|c| tree.nodes[c].light).fold(1.0f32, f32::max);
+            assert_eq!(n.light, most);
+        }
+        let first = tree.split_leaf(bright as u32) as usize;
+        let count = tree.nodes[bright].child_count as usize;
+        assert!(count >= 3);
+        assert!(tree.nodes[first..first + count]
+            .iter()
+            .all(|n| n.light == 5.0));
     }
 }

@@ -339,6 +339,102 @@ fn all_in_front(tree: &ClusterTree, n: DVec3, d: f64) -> bool {
     true
 }
 
+/// Most receiver-emitter terms [`light_factors`] may evaluate; above it every factor is 1 (a
+/// scene whose every triangle is a separate light).
+pub const LIGHT_FACTOR_BUDGET: u64 = 50_000_000;
+
+/// Area-weighted quantile of the patches' estimated direct light that [`light_factors`] takes
+/// as the scene's typical brightness: a patch brighter than 90% of the scene's area weighs its
+/// links by how much brighter it is.
+pub const TYPICAL_LIGHT_QUANTILE: f64 = 0.9;
+
+/// Per patch, how much brighter than the scene's typical patch its direct light may make it:
+/// the estimate `max_c rho_c sum_e E_e,c F_e` over the emitting triangles `e` (the point form
+/// factor at the patch's centroid, `A_e cos cos / (pi d^2 + A_e)`, unoccluded), over its
+/// [`TYPICAL_LIGHT_QUANTILE`] over the area of the patches it lights; at least 1, and 1 everywhere when the
+/// scene has no emitting triangle, nothing lit, or more than [`LIGHT_FACTOR_BUDGET`] terms.
+///
+/// The flux rule (`hierarchy::links::LinkParams::flux_share`) bounds what a link carries at
+/// a typical radiance; a surface beside a light carries far more. A desk lamp's shade around
+/// its bulb in `b90_office.obj` is about 200 times as bright as the room's surfaces: its
+/// triangles, small, were faint pairs to each other, coupled coarsely and not split, and the
+/// light it reflects into itself came out 5.4% short (that alone, with everything else black,
+/// against the path tracer on patches of at most 0.25 m).
+pub fn light_factors(patches: &Patches) -> Vec<f32> {
+    let n = patches.len();
+    let emitters: Vec<usize> = (0..n)
+        .filter(|&p| patches.active[p] && patches.is_emitter(p))
+        .collect();
+    if emitters.is_empty() || (n as u64).saturating_mul(emitters.len() as u64) > LIGHT_FACTOR_BUDGET
+    {
+        return vec![1.0; n];
+    }
+    let light: Vec<f64> = (0..n)
+        .into_par_iter()
+        .map(|p| {
+            let rho = patches.albedo[p];
+            if !patches.active[p] || patches.is_emitter(p) || rho.iter().all(|&r| r <= 0.0) {
+                return 0.0;
+            }
+            let (x, n_x) = (patches.centroid[p], patches.normal[p]);
+            let mut sum = [0.0f64; 3];
+            for &e in &emitters {
+                let v = patches.centroid[e] - x;
+                let d2 = v.length_squared();
+                if !(d2 > 0.0) {
+                    continue;
+                }
+                let d = d2.sqrt();
+                let cos_x = n_x.dot(v) / d;
+                let mut cos_e = -patches.normal[e].dot(v) / d;
+                if patches.is_two_sided(e) {
+                    cos_e = cos_e.abs();
+                }
+                if !(cos_x > 0.0 && cos_e > 0.0) {
+                    continue;
+                }
+                let a = patches.area[e];
+                let f = a * cos_x * cos_e / (std::f64::consts::PI * d2 + a);
+                for (s, e) in sum.iter_mut().zip(patches.emission[e]) {
+                    *s += e * f;
+                }
+            }
+            (0..3).map(|c| rho[c] * sum[c]).fold(0.0, f64::max)
+        })
+        .collect();
+    // The area-weighted quantile over the area of the patches that reflect some direct light.
+    let mut lit: Vec<(f64, f64)> = (0..n)
+        .filter(|&p| patches.active[p] && !patches.is_emitter(p))
+        .map(|p| (light[p], patches.area[p]))
+        .filter(|&(l, a)| l > 0.0 && l.is_finite() && a > 0.0)
+        .collect();
+    lit.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let total: f64 = lit.iter().map(|&(_, a)| a).sum();
+    let mut acc = 0.0;
+    let mut typical = 0.0;
+    for &(l, a) in &lit {
+        acc += a;
+        typical = l;
+        if acc >= TYPICAL_LIGHT_QUANTILE * total {
+            break;
+        }
+    }
+    if !(typical > 0.0 && typical.is_finite()) {
+        return vec![1.0; n];
+    }
+    light
+        .iter()
+        .map(|&l| {
+            let f = l / typical;
+            if f > 1.0 && f.is_finite() {
+                f as f32
+            } else {
+                1.0
+            }
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -350,5 +446,58 @@ mod tests {
         assert!(is_grey([1e30, 1e30, 1e30]));
         assert!(!is_grey([0.5, 0.5, 0.51]));
         assert!(!is_grey([0.0, 0.0, 1e-30]));
+    }
+
+    /// A floor of 10 x 10 under a square light 3 above it, and a small plate 0.5 under the
+    /// light: the plate is lit tens of times as brightly as the floor.
+    fn plate_under_a_light(emission: f64) -> Patches {
+        let v = DVec3::new;
+        let quad = |a: DVec3, b: DVec3, c: DVec3, d: DVec3| [[a, b, c], [a, c, d]];
+        let mut tris = Vec::new();
+        tris.extend(quad(
+            v(-5., 0., -5.),
+            v(-5., 0., 5.),
+            v(5., 0., 5.),
+            v(5., 0., -5.),
+        ));
+        tris.extend(quad(
+            v(-0.5, 3., -0.5),
+            v(0.5, 3., -0.5),
+            v(0.5, 3., 0.5),
+            v(-0.5, 3., 0.5),
+        ));
+        tris.extend(quad(
+            v(-0.1, 2.5, -0.1),
+            v(-0.1, 2.5, 0.1),
+            v(0.1, 2.5, 0.1),
+            v(0.1, 2.5, -0.1),
+        ));
+        let albedo = vec![[0.5; 3]; 6];
+        let mut emitted = vec![[0.0; 3]; 6];
+        emitted[2] = [emission; 3];
+        emitted[3] = [emission; 3];
+        crate::mesh::build_patches(
+            &crate::Scene::from_triangles(&tris, &albedo, &emitted),
+            None,
+        )
+    }
+
+    #[test]
+    fn a_plate_beside_a_light_weighs_its_links_by_how_much_brighter_it_is() {
+        let patches = plate_under_a_light(1.0);
+        assert!(
+            patches.normal[0].y > 0.5 && patches.normal[2].y < -0.5 && patches.normal[4].y > 0.5
+        );
+        let f = light_factors(&patches);
+        // The floor is the typical surface; the light's own triangles never weigh.
+        assert_eq!(&f[..4], &[1.0; 4]);
+        // Each floor triangle's centroid lies 2.4 off the light's axis, 3 below it; the plate's
+        // right under it, 0.5 below: about 40 times the light.
+        assert!(f[4] > 10.0 && f[4] < 100.0, "{f:?}");
+        assert_eq!(f[4], f[5]);
+        // Scale-free: ten times the emission gives the same factors.
+        assert_eq!(light_factors(&plate_under_a_light(10.0)), f);
+        // No light: every factor is 1.
+        assert_eq!(light_factors(&plate_under_a_light(0.0)), vec![1.0; 6]);
     }
 }

@@ -60,14 +60,22 @@ pub struct LinkParams {
     /// own elements only. Pairs with an emitter are never faint: near a light, the receiver's
     /// resolution carries the light's gradient (the generated classroom with emitters faint as
     /// well: 2.55% against its path-traced reference, bias +1.6%; with them kept, 2.34%, +0.5%).
+    ///
+    /// Both tests weigh the flux by the sender's [`crate::hierarchy::Node::light`], how much
+    /// brighter than the scene's typical surface its direct light makes it
+    /// ([`crate::solve::model::light_factors`]): the rule follows the light a link carries, not
+    /// only its geometry. b90_office's desk-lamp shade, about 200 times as bright as the room,
+    /// was faint to itself; weighed, b90_office 1.66% -> 1.56% from its path-traced reference
+    /// (the shade -5.4% -> -3.6%), 34.4M -> 36.3M links; the generated classroom 1.425% ->
+    /// 1.401%, 8.72M -> 8.93M links; the seed room 0.1% more links, the same error.
     pub flux_share: f64,
     /// A faint pair (see [`LinkParams::flux_share`]) whose bounding spheres overlap becomes one
     /// cluster link where it is first found faint, instead of being refined down to exact
     /// couplings between its elements. What is lost is the near field of small things among
     /// themselves (a chair's tessellated seat, a lamp's shade), evaluated from the sender's
     /// centroid. Off by default; on in the `fast` preset. Measured at the default preset:
-    /// b90_office 56.3 s, 3.49 GB, 2.79% from its path-traced reference -> 24.9 s, 1.32 GB,
-    /// 3.79% (34.4M -> 6.5M links; one run each). Measured on an earlier build: the generated
+    /// b90_office 51.4 s, 3.65 GB, 1.56% from its path-traced reference -> 20.5 s, 1.37 GB,
+    /// 2.47% (36.3M -> 6.7M links; one run each). Measured on an earlier build: the generated
     /// classroom 7.1 s, 0.83 GB, 2.26% -> 6.2 s, 0.64 GB, 2.37%; in the `fast` preset
     /// b90_office 38.8 s, 2.25 GB, 5.06% -> 10.5 s, 0.76 GB, 7.66%, the classroom 5.1 s,
     /// 0.60 GB, 12.8% -> 2.8 s, 0.41 GB, 14.3%, the seed room unchanged (5.44%).

@@ -132,7 +132,7 @@ pub(super) fn faint(
         };
         apart.min(std::f64::consts::PI)
     };
-    (rn.area * omega(sn)).min(sn.area * omega(rn)) <= flux_limit
+    (rn.area * omega(sn)).min(sn.area * omega(rn)) * f64::from(sn.light) <= flux_limit
 }
 
 /// What the traversal found below some node pairs (one task's share, merged in pair order).
@@ -264,7 +264,7 @@ impl Traversal<'_> {
             };
             if small(omega_s, omega_r)
                 || (leaf_pair && small(most_solid_angle(rn, sn), most_solid_angle(sn, rn)))
-                || (rn.area * flux_s).min(sn.area * flux_r) <= self.flux_limit
+                || (rn.area * flux_s).min(sn.area * flux_r) * f64::from(sn.light) <= self.flux_limit
             {
                 self.link((s, r), found);
                 return;

@@ -40,6 +40,7 @@ impl BaseTree {
         } = model::Backs::of(patches, options);
         tree.mark_back_blocking(&back_blocking);
         tree.mark_two_sided(&two_sided);
+        tree.mark_light(&model::light_factors(patches));
         BaseTree {
             nodes: tree.nodes.len(),
             tree,
