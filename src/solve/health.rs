@@ -142,7 +142,8 @@ pub const DAMPING: f64 = 0.5;
 /// first stage damps the antiradiance only and leaves the radiance's slow positive modes (a
 /// closed room's light level) at full speed; only a solve that stalls again damps both.
 /// Measured against damping both at once (`antiradiance scene office`, Venetian blinds,
-/// `fast` preset: 67 -> 49 sweeps; b90_office 27 -> 25 sweeps, the same answer within 0.005%).
+/// `fast` preset: 67 -> 49 sweeps, default preset 106 -> 104 with its radiance damped too
+/// after 50; b90_office 27 -> 25 sweeps, the same answer within 0.005%).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Damping {
     /// Plain sweeps.
