@@ -67,8 +67,9 @@ pub struct Node {
     /// A leaf of a two-sided patch: both its faces emit and reflect
     /// ([`ClusterTree::mark_two_sided`]; false on clusters).
     pub two_sided: bool,
-    /// How much brighter than the scene's mean the brightest patch below may be, from an
-    /// estimate of its direct light ([`ClusterTree::mark_light`]): at least 1. The flux rule
+    /// How much brighter than the scene's typical surface the brightest patch below may be,
+    /// from an estimate of its direct light ([`ClusterTree::mark_light`],
+    /// [`crate::solve::model::light_factors`]): at least 1. The flux rule
     /// weighs a sender's links by it ([`crate::hierarchy::links::LinkParams::flux_share`]).
     pub light: f32,
     /// Largest height of `center` above the plane of any triangle below,
@@ -817,8 +818,8 @@ impl ClusterTree {
     }
 
     /// Sets every node's [`Node::light`]: a leaf's from `per_patch[p]`, its patch's brightness
-    /// over the scene's mean (values below 1, NaN and missing ones count 1), a cluster's the
-    /// largest of its leaves'.
+    /// over the scene's typical surface's (values below 1, NaN and missing ones count 1), a
+    /// cluster's the largest of its leaves'.
     pub fn mark_light(&mut self, per_patch: &[f32]) {
         for n in &mut self.nodes {
             let light = if n.is_leaf() {

@@ -403,9 +403,11 @@ pub fn light_factors(patches: &Patches) -> Vec<f32> {
         })
         .collect();
     // The area-weighted quantile over the area of the patches that reflect some direct light.
-    let mut lit: Vec<(f64, f64)> = (0..n)
-        .filter(|&p| patches.active[p] && !patches.is_emitter(p))
-        .map(|p| (light[p], patches.area[p]))
+    // (Inactive patches and emitters have no light estimate: 0.)
+    let mut lit: Vec<(f64, f64)> = light
+        .iter()
+        .zip(&patches.area)
+        .map(|(&l, &a)| (l, a))
         .filter(|&(l, a)| l > 0.0 && l.is_finite() && a > 0.0)
         .collect();
     lit.sort_by(|a, b| a.0.total_cmp(&b.0));

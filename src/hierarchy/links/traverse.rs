@@ -106,8 +106,22 @@ pub(super) fn flux_limit(params: &LinkParams, tree: &ClusterTree) -> f64 {
     params.flux_share * params.epsilon * std::f64::consts::PI * tree.nodes[0].area
 }
 
+/// The flux of the pair (`sn` sending to `rn`) that the flux rule compares with its limit:
+/// `min(A_r * omega_s, A_s * omega_r)`, the form-factor flux at the solid angles given (each an
+/// upper bound of what that node subtends from the other), times the sender's
+/// [`crate::hierarchy::Node::light`] (a sender brighter than the scene's typical surface
+/// carries that much more).
+fn pair_flux(
+    sn: &crate::hierarchy::Node,
+    rn: &crate::hierarchy::Node,
+    omega_s: f64,
+    omega_r: f64,
+) -> f64 {
+    (rn.area * omega_s).min(sn.area * omega_r) * f64::from(sn.light)
+}
+
 /// True when the pair (`sn`, `rn`) carries at most `flux_limit` whatever its shape and holds
-/// no emitter: `min(A_r * omega_s, A_s * omega_r) <= flux_limit`, each solid angle bounded by
+/// no emitter: [`pair_flux`] `<= flux_limit`, each solid angle bounded by
 /// what a node can subtend from anywhere outside its bounds at their gap (a triangle of area
 /// `A` at distance at least `g`: `A / g^2`; a cluster: its bounds' faces), and by `pi` (the
 /// projected solid angle a receiver can gather, so that tiny triangles are faint next to
@@ -132,7 +146,7 @@ pub(super) fn faint(
         };
         apart.min(std::f64::consts::PI)
     };
-    (rn.area * omega(sn)).min(sn.area * omega(rn)) * f64::from(sn.light) <= flux_limit
+    pair_flux(sn, rn, omega(sn), omega(rn)) <= flux_limit
 }
 
 /// What the traversal found below some node pairs (one task's share, merged in pair order).
@@ -264,7 +278,7 @@ impl Traversal<'_> {
             };
             if small(omega_s, omega_r)
                 || (leaf_pair && small(most_solid_angle(rn, sn), most_solid_angle(sn, rn)))
-                || (rn.area * flux_s).min(sn.area * flux_r) * f64::from(sn.light) <= self.flux_limit
+                || pair_flux(sn, rn, flux_s, flux_r) <= self.flux_limit
             {
                 self.link((s, r), found);
                 return;
