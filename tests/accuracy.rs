@@ -234,6 +234,123 @@ fn closed_objects_have_no_exposed_backs() {
     );
 }
 
+/// A box of five faces (no bottom) facing out, over a floor of 1 m cells under a light: the
+/// box's backs see its own inside and the floor cells under it. Standing on the floor, those
+/// cells are dark (everything their fronts see is a back), so no back of the box is exposed.
+/// Raised 0.25 m, light reaches the cells under it through the gap; made emitters, the cells
+/// under it light it themselves: either way the box's backs are exposed.
+#[test]
+fn open_bottomed_box_standing_on_a_floor_has_no_exposed_backs() {
+    fn quad(out: &mut Vec<[DVec3; 3]>, q: [DVec3; 4], facing: DVec3) {
+        let n = (q[1] - q[0]).cross(q[2] - q[0]);
+        let (a, b, c, d) = if n.dot(facing) > 0.0 {
+            (q[0], q[1], q[2], q[3])
+        } else {
+            (q[0], q[3], q[2], q[1])
+        };
+        out.push([a, b, c]);
+        out.push([a, c, d]);
+    }
+    let p = DVec3::new;
+    let scene = |lift: f64, emitting: bool| {
+        let mut corners = Vec::new();
+        let mut emission = Vec::new();
+        for i in 0..4 {
+            for k in 0..4 {
+                let (x, z) = (i as f64, k as f64);
+                quad(
+                    &mut corners,
+                    [
+                        p(x, 0.0, z),
+                        p(x + 1.0, 0.0, z),
+                        p(x + 1.0, 0.0, z + 1.0),
+                        p(x, 0.0, z + 1.0),
+                    ],
+                    DVec3::Y,
+                );
+                let under_box = (1..3).contains(&i) && (1..3).contains(&k);
+                let e = if emitting && under_box { 1.0 } else { 0.0 };
+                emission.extend([[e; 3]; 2]);
+            }
+        }
+        quad(
+            &mut corners,
+            [
+                p(1.5, 3.0, 1.5),
+                p(2.5, 3.0, 1.5),
+                p(2.5, 3.0, 2.5),
+                p(1.5, 3.0, 2.5),
+            ],
+            -DVec3::Y,
+        );
+        emission.extend([[1.0; 3]; 2]);
+        let box_first = corners.len();
+        let (lo, hi) = (lift, lift + 1.0);
+        let walls = [
+            (
+                [
+                    p(1.0, lo, 1.0),
+                    p(3.0, lo, 1.0),
+                    p(3.0, hi, 1.0),
+                    p(1.0, hi, 1.0),
+                ],
+                -DVec3::Z,
+            ),
+            (
+                [
+                    p(1.0, lo, 3.0),
+                    p(3.0, lo, 3.0),
+                    p(3.0, hi, 3.0),
+                    p(1.0, hi, 3.0),
+                ],
+                DVec3::Z,
+            ),
+            (
+                [
+                    p(1.0, lo, 1.0),
+                    p(1.0, lo, 3.0),
+                    p(1.0, hi, 3.0),
+                    p(1.0, hi, 1.0),
+                ],
+                -DVec3::X,
+            ),
+            (
+                [
+                    p(3.0, lo, 1.0),
+                    p(3.0, lo, 3.0),
+                    p(3.0, hi, 3.0),
+                    p(3.0, hi, 1.0),
+                ],
+                DVec3::X,
+            ),
+            (
+                [
+                    p(1.0, hi, 1.0),
+                    p(3.0, hi, 1.0),
+                    p(3.0, hi, 3.0),
+                    p(1.0, hi, 3.0),
+                ],
+                DVec3::Y,
+            ),
+        ];
+        for (q, facing) in walls {
+            quad(&mut corners, q, facing);
+            emission.extend([[0.0; 3]; 2]);
+        }
+        let albedo = vec![[0.5; 3]; corners.len()];
+        let scene = antiradiance::scene::Scene::from_triangles(&corners, &albedo, &emission);
+        (build_patches(&scene, None), box_first..corners.len())
+    };
+    let exposed_in_box = |lift: f64, emitting: bool| {
+        let (patches, box_patches) = scene(lift, emitting);
+        let exposed = antiradiance::solve::model::exposed_backs(&patches);
+        box_patches.filter(|&t| exposed[t]).count()
+    };
+    assert_eq!(exposed_in_box(0.0, false), 0, "standing on the floor");
+    assert!(exposed_in_box(0.25, false) > 0, "raised above the floor");
+    assert!(exposed_in_box(0.0, true) > 0, "over emitting cells");
+}
+
 /// Back-to-back twins (each triangle of a closed room plus its reversed copy) cover each
 /// other's backs: none is exposed, so none blocks at its back.
 #[test]
