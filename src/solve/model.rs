@@ -12,7 +12,7 @@
 //!
 //! What was decided is reported per solve in [`ModelStats`] (the JSON report's `stats.model`).
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicU8, Ordering};
 
 use glam::DVec3;
 use rayon::prelude::*;
@@ -55,7 +55,7 @@ const BEHIND_NOTHING: f64 = 1e-12;
 /// shell). A patch with the whole scene's box on or in front of its plane has nothing behind
 /// it and is not exposed, without rays (the walls of a room shell; their back rays, started
 /// just in front of them, could meet a coplanar neighbour's front where they cross the plane
-/// and count it). A front that is itself dark ([`dark_fronts`]: every ray from it meets a
+/// and count it). A front that is itself dark (`DarkFronts`: every ray from it meets a
 /// back, as the floor under a box standing open-bottomed on it) does not count: such a box's
 /// backs see no light. Without that test the subdivided Cornell box's blocks were found exposed
 /// (37,753 of its 258,750 patches blocking at their backs, against 3,298 with it: 4.59M ->
@@ -94,33 +94,20 @@ pub fn exposed_backs(patches: &Patches) -> Vec<bool> {
         .into_par_iter()
         .map(|p| patches.active[p] && !twinned[p] && !nothing_behind(p))
         .collect();
-    // Hits on fronts first (recording which fronts were met); then, for the backs found
-    // exposed, again without the fronts that are dark (`dark_fronts`: the floor under an
-    // open-bottomed box); then, for two-sided patches still unexposed, hits on the back faces
-    // of two-sided patches found exposed (lit) count too.
-    let met: Vec<AtomicBool> = (0..patches.len()).map(|_| AtomicBool::new(false)).collect();
-    let mut exposed = exposed_where(patches, &scene, &candidates, |hit, dir| {
-        let front = patches.normal[hit].dot(dir) < 0.0;
-        if front {
-            met[hit].store(true, Ordering::Relaxed);
-        }
-        front
-    });
-    let dark = dark_fronts(patches, &scene, &met);
-    if dark.iter().any(|&d| d) {
-        let again = exposed.clone();
-        exposed = exposed_where(patches, &scene, &again, |hit, dir| {
-            patches.normal[hit].dot(dir) < 0.0 && !dark[hit]
-        });
-    }
+    // Hits on fronts that are not dark (`DarkFronts`: the floor under an open-bottomed box)
+    // first; then, for two-sided patches still unexposed, hits on the back faces of two-sided
+    // patches found exposed (lit) count too.
+    let dark = DarkFronts::new(patches, &scene);
+    let lit_front =
+        |hit: usize, dir: DVec3| patches.normal[hit].dot(dir) < 0.0 && !dark.is_dark(hit);
+    let mut exposed = exposed_where(patches, &scene, &candidates, lit_front);
     if patches.has_two_sided() {
         let again: Vec<bool> = (0..patches.len())
             .map(|p| candidates[p] && !exposed[p] && patches.is_two_sided(p))
             .collect();
         let first = exposed.clone();
         let second = exposed_where(patches, &scene, &again, |hit, dir| {
-            (patches.normal[hit].dot(dir) < 0.0 && !dark[hit])
-                || (patches.is_two_sided(hit) && first[hit])
+            lit_front(hit, dir) || (patches.is_two_sided(hit) && first[hit])
         });
         for (e, s) in exposed.iter_mut().zip(second) {
             *e |= s;
@@ -129,43 +116,80 @@ pub fn exposed_backs(patches: &Patches) -> Vec<bool> {
     exposed
 }
 
-/// Per patch: among the fronts marked in `met`, those that are dark: a one-sided patch that
-/// neither emits nor has an analytic source, all of whose [`BACK_RAYS_MAX`] cosine-distributed
-/// rays from its front meet the back of a one-sided patch that does not emit. Light reaches
-/// such a front only through those backs: the floor under a box standing open-bottomed on it,
-/// the ground under a closed cabinet. A back that sees such fronts sees no light there.
-/// (Whatever a ray meets first decides; one ray that leaves the scene or meets a front, an
-/// emitter or a two-sided patch makes the front lit.)
-fn dark_fronts(patches: &Patches, scene: &RayScene, met: &[AtomicBool]) -> Vec<bool> {
-    let side = (BACK_RAYS_MAX as f64).sqrt().ceil() as usize;
-    let unlit = |p: usize| {
+/// Which fronts are dark, decided on demand and remembered: a one-sided patch that neither
+/// emits nor has an analytic source, all of whose [`BACK_RAYS_MAX`] cosine-distributed rays from
+/// its front meet the back of a one-sided patch that does not emit. Light reaches such a front
+/// only through those backs: the floor under a box standing open-bottomed on it, the ground
+/// under a closed cabinet. A back that sees such fronts sees no light there. (Whatever a ray
+/// meets first decides; one ray that leaves the scene or meets a front, an emitter or a
+/// two-sided patch makes the front lit.) Each patch's rays have their own seed, so the answer
+/// does not depend on which thread asks first.
+struct DarkFronts<'a> {
+    patches: &'a Patches,
+    scene: &'a RayScene<'a>,
+    /// Per patch: [`UNKNOWN`], [`LIT`] or [`DARK`].
+    state: Vec<AtomicU8>,
+}
+
+/// [`DarkFronts`]: not yet decided.
+const UNKNOWN: u8 = 0;
+/// [`DarkFronts`]: lit.
+const LIT: u8 = 1;
+/// [`DarkFronts`]: dark.
+const DARK: u8 = 2;
+
+impl<'a> DarkFronts<'a> {
+    fn new(patches: &'a Patches, scene: &'a RayScene<'a>) -> DarkFronts<'a> {
+        DarkFronts {
+            patches,
+            scene,
+            state: (0..patches.len()).map(|_| AtomicU8::new(UNKNOWN)).collect(),
+        }
+    }
+
+    /// True when patch `p`'s front is dark (see [`DarkFronts`]).
+    fn is_dark(&self, p: usize) -> bool {
+        match self.state[p].load(Ordering::Relaxed) {
+            UNKNOWN => {
+                let dark = self.test(p);
+                self.state[p].store(if dark { DARK } else { LIT }, Ordering::Relaxed);
+                dark
+            }
+            known => known == DARK,
+        }
+    }
+
+    /// A one-sided patch that neither emits nor has an analytic source.
+    fn unlit(&self, p: usize) -> bool {
+        let patches = self.patches;
         !patches.is_emitter(p)
             && !patches.is_two_sided(p)
             && patches
                 .source
                 .get(p)
                 .is_none_or(|s| s.iter().all(|&x| x <= 0.0))
-    };
-    (0..patches.len())
-        .into_par_iter()
-        .map(|p| {
-            if !met[p].load(Ordering::Relaxed) || !patches.active[p] || !unlit(p) {
-                return false;
-            }
-            let (tri, n) = (&patches.corners[p], patches.normal[p]);
-            let mut rng = Rng::new(0x6461_726b, p as u64);
-            (0..BACK_RAYS_MAX).all(|k| {
-                let (i, j) = ((k % side) as f64, (k / side % side) as f64);
-                let u1 = (i + rng.next_f64()) / side as f64;
-                let u2 = (j + rng.next_f64()) / side as f64;
-                let org = point_on_triangle(tri, u1, u2) + n * (2.0 * crate::geometry::SCENE_EPS);
-                let dir = cosine_direction(n, rng.next_f64(), rng.next_f64());
-                scene
-                    .closest(org, dir, p)
-                    .is_some_and(|hit| patches.normal[hit.patch].dot(dir) > 0.0 && unlit(hit.patch))
+    }
+
+    /// The rays of [`DarkFronts`] from patch `p`'s front.
+    fn test(&self, p: usize) -> bool {
+        let patches = self.patches;
+        if !patches.active[p] || !self.unlit(p) {
+            return false;
+        }
+        let side = (BACK_RAYS_MAX as f64).sqrt().ceil() as usize;
+        let (tri, n) = (&patches.corners[p], patches.normal[p]);
+        let mut rng = Rng::new(0x6461_726b, p as u64);
+        (0..BACK_RAYS_MAX).all(|k| {
+            let (i, j) = ((k % side) as f64, (k / side % side) as f64);
+            let u1 = (i + rng.next_f64()) / side as f64;
+            let u2 = (j + rng.next_f64()) / side as f64;
+            let org = point_on_triangle(tri, u1, u2) + n * (2.0 * crate::geometry::SCENE_EPS);
+            let dir = cosine_direction(n, rng.next_f64(), rng.next_f64());
+            self.scene.closest(org, dir, p).is_some_and(|hit| {
+                patches.normal[hit.patch].dot(dir) > 0.0 && self.unlit(hit.patch)
             })
         })
-        .collect()
+    }
 }
 
 /// [`exposed_backs`]'s ray test for the patches marked in `candidates` (false for the others),
