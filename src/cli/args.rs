@@ -122,7 +122,7 @@ pub struct SolverArgs {
     pub flux_share: Option<f64>,
     /// Faint pairs whose bounding spheres overlap become one link each instead of exact
     /// couplings between their elements: about twice as fast on interiors full of small
-    /// tessellated objects, less accurate (b90_office 1.56% -> 2.47% from its reference; on in
+    /// tessellated objects, less accurate (b90_office 1.52% -> 2.34% from its reference; on in
     /// the fast preset).
     #[arg(long, conflicts_with = "exact_faint_pairs")]
     pub faint_links: bool,

@@ -59,9 +59,10 @@ const BEHIND_NOTHING: f64 = 1e-12;
 /// back, as the floor under a box standing open-bottomed on it) does not count: such a box's
 /// backs see no light. Without that test the subdivided Cornell box's blocks were found exposed
 /// (37,753 of its 258,750 patches blocking at their backs, against 3,298 with it: 4.59M ->
-/// 4.31M links, 8 -> 10 sweeps of 0.63 -> 0.52 s, 2.77% -> 2.74% rms from its path-traced
-/// references); b90_office 10,267 -> 7,335 blocking patches, 36.3M -> 33.2M links, peak 3.65 ->
-/// 3.35 GB, 1.56% -> 1.52% (bias -0.91% -> -0.85%) from its reference. Where the floor under the box is one patch with
+/// 4.31M links, 8 -> 10 sweeps, 8.44 -> 8.59 s, 2.77% -> 2.74% rms from its path-traced
+/// references; the 1M-triangle box 226,734 -> 72,569); b90_office 10,267 -> 7,221 blocking
+/// patches, 36.3M -> 33.1M links, peak 3.65 -> 3.31 GB, 1.56% -> 1.52% (bias -0.91% ->
+/// -0.85%) from its reference. Where the floor under the box is one patch with
 /// the floor around it (the 46-triangle Cornell box), the false positive stays: it costs
 /// two-sided bins, not light.
 pub fn exposed_backs(patches: &Patches) -> Vec<bool> {

@@ -48,7 +48,7 @@ pub struct SolverOptions {
     /// Faint pairs whose bounding spheres overlap become one cluster link each instead of exact
     /// couplings between their elements ([`crate::hierarchy::links::LinkParams::faint_links`]):
     /// about twice as fast on CAD interiors full of small tessellated objects, and less
-    /// accurate (b90_office 1.56% -> 2.47% from its reference). Off by default; on in `fast`.
+    /// accurate (b90_office 1.52% -> 2.34% from its reference). Off by default; on in `fast`.
     pub faint_links: bool,
     /// Receiver fields of the hierarchical solver ([`crate::solve::hierarchical`]): a cluster
     /// link whose receiver's extent is at most this times its distance from the sender (and
