@@ -181,16 +181,30 @@ impl<'a> DarkFronts<'a> {
         let (tri, n) = (&patches.corners[p], patches.normal[p]);
         let mut rng = Rng::new(0x6461_726b, p as u64);
         (0..BACK_RAYS_MAX).all(|k| {
-            let (i, j) = ((k % side) as f64, (k / side % side) as f64);
-            let u1 = (i + rng.next_f64()) / side as f64;
-            let u2 = (j + rng.next_f64()) / side as f64;
-            let org = point_on_triangle(tri, u1, u2) + n * (2.0 * crate::geometry::SCENE_EPS);
-            let dir = cosine_direction(n, rng.next_f64(), rng.next_f64());
+            let (org, dir) = stratified_ray(tri, n, n, (k, side), &mut rng);
             self.scene.closest(org, dir, p).is_some_and(|hit| {
                 patches.normal[hit.patch].dot(dir) > 0.0 && self.unlit(hit.patch)
             })
         })
     }
+}
+
+/// Ray `k` of a patch's test rays (triangle `tri`, normal `n`): from a point stratified over
+/// the triangle (a `side` x `side` grid of its unit square), `2 SCENE_EPS` in front of it,
+/// cosine-distributed about `axis` (`n` into its front, `-n` into its back).
+fn stratified_ray(
+    tri: &[DVec3; 3],
+    n: DVec3,
+    axis: DVec3,
+    (k, side): (usize, usize),
+    rng: &mut Rng,
+) -> (DVec3, DVec3) {
+    let (i, j) = ((k % side) as f64, (k / side % side) as f64);
+    let u1 = (i + rng.next_f64()) / side as f64;
+    let u2 = (j + rng.next_f64()) / side as f64;
+    let org = point_on_triangle(tri, u1, u2) + n * (2.0 * crate::geometry::SCENE_EPS);
+    let dir = cosine_direction(axis, rng.next_f64(), rng.next_f64());
+    (org, dir)
 }
 
 /// [`exposed_backs`]'s ray test for the patches marked in `candidates` (false for the others),
@@ -214,12 +228,7 @@ fn exposed_where(
             let mut rng = Rng::new(0x6261_636b, p as u64);
             let (mut fronts, mut hits) = (0usize, 0usize);
             for k in 0..rays {
-                // Stratified over the triangle (a side x side grid of its unit square).
-                let (i, j) = ((k % side) as f64, (k / side % side) as f64);
-                let u1 = (i + rng.next_f64()) / side as f64;
-                let u2 = (j + rng.next_f64()) / side as f64;
-                let org = point_on_triangle(tri, u1, u2) + n * (2.0 * crate::geometry::SCENE_EPS);
-                let dir = cosine_direction(-n, rng.next_f64(), rng.next_f64());
+                let (org, dir) = stratified_ray(tri, n, -n, (k, side), &mut rng);
                 if let Some(hit) = scene.closest(org, dir, p) {
                     hits += 1;
                     if lit(hit.patch, dir) {
