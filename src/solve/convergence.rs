@@ -219,19 +219,26 @@ pub fn start_damping(
     true
 }
 
-/// Damps the state a sweep just wrote (`radiance`, `anti`, against the state it read,
-/// `previous_radiance`, `previous_anti`) once the solve is damped ([`start_damping`],
-/// [`crate::solve::health::damp`]); leaves it as it is before. The same in both solvers.
+/// A state array a sweep just wrote, beside the one it read ([`damp_if_damped`]).
+pub type Swept<'a, T, const N: usize> = (&'a mut [[T; N]], &'a [[T; N]]);
+
+/// Damps the state a sweep just wrote (each radiance array of `radiance` and `anti`, against
+/// the state it read beside it) as far as the solve is damped ([`start_damping`],
+/// [`Damping`], [`crate::solve::health::damp`]): the antiradiance once it is damped at all,
+/// the radiance (the fronts', and the back faces' in the hierarchical solver) once it damps
+/// everything; leaves it as it is before. The same in both solvers.
 pub fn damp_if_damped<const N: usize>(
     guard: &Guard,
-    (radiance, previous_radiance): (&mut [[f64; N]], &[[f64; N]]),
-    (anti, previous_anti): (&mut [[f32; N]], &[[f32; N]]),
+    radiance: &mut [Swept<'_, f64, N>],
+    (anti, previous_anti): Swept<'_, f32, N>,
 ) {
     if guard.damped() {
         crate::solve::health::damp(anti, previous_anti);
     }
     if guard.damping() == Damping::All {
-        crate::solve::health::damp(radiance, previous_radiance);
+        for (radiance, previous) in radiance.iter_mut() {
+            crate::solve::health::damp(radiance, previous);
+        }
     }
 }
 

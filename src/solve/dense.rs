@@ -160,7 +160,7 @@ fn solve_one_sided(
         start_damping(iteration, &mut guard, &mut convergence, &mut stats);
         damp_if_damped(
             &guard,
-            (&mut radiance, &next_radiance),
+            &mut [(&mut radiance, &next_radiance)],
             (&mut anti, &next_anti),
         );
     }

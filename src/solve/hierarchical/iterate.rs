@@ -260,10 +260,14 @@ impl Prepared {
         two_back: Option<&TwoBack<C>>,
         flat: (&mut Vec<f64>, &mut Vec<f64>),
     ) -> bool {
-        damp_if_damped(guard, (radiance, next_radiance), (anti, next_anti));
-        if guard.damping() == Damping::All {
-            crate::solve::health::damp(radiance_back, next_radiance_back);
-        }
+        damp_if_damped(
+            guard,
+            &mut [
+                (radiance, next_radiance),
+                (radiance_back, next_radiance_back),
+            ],
+            (anti, next_anti),
+        );
         self.mix_step(
             anderson,
             convergence,

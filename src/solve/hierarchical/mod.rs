@@ -41,7 +41,7 @@ use crate::solve::budget::{
     self, Budget, HierarchicalCosts, LinkBudget, MemoryStats, ModelCounts, OverBudget,
 };
 use crate::solve::convergence::{damp_if_damped, end_sweep, start_damping};
-use crate::solve::health::{self, Damping, Guard};
+use crate::solve::health::{self, Guard};
 use crate::solve::model::{self, ModelStats};
 pub use crate::solve::solution::HierarchyTimings;
 use crate::solve::solution::{Solution, SolveStats};
