@@ -1,6 +1,7 @@
 //! The exact element-to-element couplings of link refinement: per receiving element, every
-//! exact sender integrated over the receiver's one set of points, per pair of faces that see
-//! each other.
+//! exact sender integrated over the receiver's one set of points. A pair with a two-sided
+//! element has one link for the faces that see each other, or, when it straddles a plane, one
+//! per pair of faces.
 
 use rayon::prelude::*;
 
@@ -33,6 +34,116 @@ impl Row {
         self.entries.extend_from_slice(entries);
     }
 }
+impl Row {
+    /// Merges the links of one element pair pushed since link `first` (one per pair of faces,
+    /// [`faces_coupled`]) into one link when they can share its faces: every link whose
+    /// entries carry the sender's radiance (`f_b`, `o_b`) reads the same sender face, and every
+    /// link whose entries light the receiver (`f_b`, `f_a`) lights the same receiver face. The
+    /// antiradiance the pair passes on (`o_a`) and creates (`o_b`) goes to the receiver's bins
+    /// whatever its faces. A pair that does not straddle either element's plane sees one face
+    /// of each, so its links always merge; a straddling pair keeps its links. The merged
+    /// entries hold the sums of the links' entries bin by bin, so the gather adds the same
+    /// terms.
+    fn merge_faces(&mut self, first: usize) {
+        let links = self.senders.len() - first;
+        if links < 2 {
+            return;
+        }
+        let n_entries: usize = self.counts[first..].iter().map(|&c| c as usize).sum();
+        let start = self.entries.len() - n_entries;
+        let (mut sender_face, mut receiver_face) = (None, None);
+        let mut at = start;
+        for k in first..self.senders.len() {
+            let side = self.sides[k];
+            let entries = &self.entries[at..at + self.counts[k] as usize];
+            at += self.counts[k] as usize;
+            let reads_b = entries.iter().any(|e| e.f_b != 0.0 || e.o_b != 0.0);
+            let lights = entries.iter().any(|e| e.f_b != 0.0 || e.f_a != 0.0);
+            for (used, face, bit) in [
+                (reads_b, &mut sender_face, EXACT_SENDER_BACK),
+                (lights, &mut receiver_face, EXACT_RECEIVER_BACK),
+            ] {
+                if used {
+                    match *face {
+                        Some(f) if f != side & bit => return,
+                        _ => *face = Some(side & bit),
+                    }
+                }
+            }
+        }
+        let mut merged: Coupling = Coupling::new();
+        for e in &self.entries[start..] {
+            let k = merged
+                .iter()
+                .position(|m| m.bin == e.bin)
+                .unwrap_or_else(|| {
+                    merged.push(Entry {
+                        bin: e.bin,
+                        ..Entry::default()
+                    });
+                    merged.len() - 1
+                });
+            let m = &mut merged[k];
+            m.f_b += e.f_b;
+            m.f_a += e.f_a;
+            m.o_b += e.o_b;
+            m.o_a += e.o_a;
+        }
+        let s = self.senders[first];
+        let side = sender_face.unwrap_or(0) | receiver_face.unwrap_or(0);
+        self.senders.truncate(first);
+        self.sides.truncate(first);
+        self.counts.truncate(first);
+        self.entries.truncate(start);
+        self.push(s, side, &merged);
+    }
+}
+
+/// True when coupling `c` of a two-sided `sender` has no receiver point in front of it (no
+/// weight of its front's radiance, `f_b` and `o_b`): its points then see the sender's back, and
+/// the back's radiance reaches them with the weights the sender's antiradiance has (`f_a`,
+/// `o_a`: it leaves through both faces, `sender.blocks_back`).
+fn seen_from_behind(sender: &PatchGeom, coupling: &CouplingParams, c: &Coupling) -> bool {
+    (sender.blocks_back || coupling.two_sided) && c.iter().all(|e| e.f_b == 0.0 && e.o_b == 0.0)
+}
+
+/// True when all of `sender` lies behind the plane of `receiver`, beyond the tolerance of
+/// [`couple`] (which then sees no part of it in front).
+fn wholly_behind(receiver: &PatchGeom, sender: &PatchGeom) -> bool {
+    let tol = crate::geometry::plane_tol(receiver.size.max(sender.size));
+    let (front, _) =
+        crate::geometry::clip_by_plane(&sender.corners, receiver.corners[0], receiver.normal, tol);
+    front.len == 0
+}
+
+/// The one link of a two-sided receiver with a sender wholly behind its plane: what its back
+/// face sees of the sender (radiance and antiradiance) and the antiradiance the sender's light
+/// makes at its back, which its front would otherwise have taken in a coupling of its own;
+/// the sender's back face when the back sees that. The same weights as the two to four links
+/// of [`faces_coupled`], from one coupling instead.
+fn coupled_behind(
+    receiver_back: &Receiver,
+    (s, sender, sender_two_sided): (u32, &PatchGeom, bool),
+    bins: &Bins,
+    coupling: &CouplingParams,
+    scratch: &mut Coupling,
+    row: &mut Row,
+) {
+    couple(receiver_back, sender, bins, coupling, scratch);
+    let mut side = EXACT_RECEIVER_BACK;
+    if sender_two_sided && !scratch.is_empty() && seen_from_behind(sender, coupling, scratch) {
+        for e in scratch.iter_mut() {
+            (e.f_b, e.o_b) = (e.f_a, e.o_a);
+        }
+        side |= EXACT_SENDER_BACK;
+    }
+    if scratch.is_empty() {
+        row.empty.push(s);
+    } else {
+        row.push(s, side, scratch);
+    }
+}
+
 /// The links of the faces other than front to front, for a pair where the receiver or the
 /// sender is two-sided: the sender's back (its B seen by the receiver points behind it:
 /// `f_b`, `o_b` of the flipped sender), the receiver's back (what its back face gathers:
@@ -71,8 +182,19 @@ fn faces_coupled(
         scratch.retain(|e| e.f_b != 0.0 || e.f_a != 0.0 || e.o_b != 0.0 || e.o_a != 0.0);
     };
     if let Some(back) = &flipped {
-        couple(receiver, back, bins, coupling, scratch);
-        keep(scratch, true, true);
+        // `scratch` holds the front-to-front coupling. When none of its points lie in front of
+        // the sender, they see its back, with the weights its antiradiance has there (the
+        // sender sends antiradiance through both faces): the same integral as the flipped
+        // sender's coupling, which is then not computed again.
+        if seen_from_behind(sender, coupling, scratch) {
+            for e in scratch.iter_mut() {
+                (e.f_b, e.o_b, e.f_a, e.o_a) = (e.f_a, e.o_a, 0.0, 0.0);
+            }
+            scratch.retain(|e| e.f_b != 0.0 || e.o_b != 0.0);
+        } else {
+            couple(receiver, back, bins, coupling, scratch);
+            keep(scratch, true, true);
+        }
         row.push(s, EXACT_SENDER_BACK, scratch);
     }
     if let Some(r_back) = receiver_back {
@@ -193,6 +315,14 @@ pub(super) fn couple_exact(
                 };
                 row.points += receiver.points_for(&geoms[s as usize]) as u64;
                 let params = if f { &faint_coupling } else { coupling };
+                if let Some(r_back) = receiver_back
+                    .as_ref()
+                    .filter(|_| wholly_behind(&geoms[r], &geoms[s as usize]))
+                {
+                    let sender = (s, &geoms[s as usize], two_sided[s as usize]);
+                    coupled_behind(r_back, sender, bins, params, scratch, &mut row);
+                    continue;
+                }
                 couple(receiver, &geoms[s as usize], bins, params, scratch);
                 if scratch.is_empty() && !two_sided[s as usize] && receiver_back.is_none() {
                     row.empty.push(s);
@@ -213,10 +343,137 @@ pub(super) fn couple_exact(
                 if row.senders.len() == before {
                     row.empty.push(s);
                 }
+                row.merge_faces(before);
             }
             meter.add(0, 0, pairs.len() as u64, row.entries.len() as u64);
             row
         })
         .collect();
     rows
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::DVec3;
+
+    fn entry(bin: u16, [f_b, f_a, o_b, o_a]: [f32; 4]) -> Entry {
+        Entry {
+            bin,
+            f_b,
+            f_a,
+            o_b,
+            o_a,
+        }
+    }
+
+    /// The entries of each link of `row`, with its faces.
+    fn links_of(row: &Row) -> Vec<(u8, Vec<Entry>)> {
+        let mut at = 0;
+        (row.sides.iter().zip(&row.counts))
+            .map(|(&side, &count)| {
+                let entries = row.entries[at..at + count as usize].to_vec();
+                at += count as usize;
+                (side, entries)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn back_to_back_pair_merges_into_one_link_of_both_backs() {
+        // Each face pair carries one kind of weight: the sender's antiradiance passed on
+        // (front to front), its back's radiance making antiradiance (sender back), what the
+        // receiver's back sees of its antiradiance (receiver back) and of its back's radiance.
+        let mut row = Row::default();
+        row.push(7, 0, &[entry(3, [0.0, 0.0, 0.0, 0.1])]);
+        row.push(7, EXACT_SENDER_BACK, &[entry(3, [0.0, 0.0, 0.2, 0.0])]);
+        let back = [
+            entry(3, [0.0, 0.3, 0.0, 0.0]),
+            entry(5, [0.0, 0.05, 0.0, 0.0]),
+        ];
+        row.push(7, EXACT_RECEIVER_BACK, &back);
+        let both = [entry(3, [0.4, 0.0, 0.0, 0.0])];
+        row.push(7, EXACT_SENDER_BACK | EXACT_RECEIVER_BACK, &both);
+        row.merge_faces(0);
+        assert_eq!(row.senders, [7]);
+        assert_eq!(
+            links_of(&row),
+            [(
+                EXACT_SENDER_BACK | EXACT_RECEIVER_BACK,
+                vec![
+                    entry(3, [0.4, 0.3, 0.2, 0.1]),
+                    entry(5, [0.0, 0.05, 0.0, 0.0])
+                ]
+            )]
+        );
+    }
+
+    #[test]
+    fn straddling_pair_keeps_a_link_per_face() {
+        // Receiver points on both sides of the sender: its front's radiance and its back's
+        // reach the receiver's front, so one link cannot say which face to read.
+        let mut row = Row::default();
+        row.push(2, 0, &[entry(1, [0.5, 0.1, 0.2, 0.1])]);
+        row.push(2, EXACT_SENDER_BACK, &[entry(1, [0.3, 0.0, 0.1, 0.0])]);
+        let before = links_of(&row);
+        row.merge_faces(0);
+        assert_eq!(links_of(&row), before);
+        assert_eq!(row.senders, [2, 2]);
+    }
+
+    #[test]
+    fn sender_back_taken_from_the_front_coupling_matches_the_flipped_sender() {
+        // A two-sided sender facing away from a receiver in front of it, tilted and offset so
+        // that its weights spread over several bins.
+        let bins = Bins::new(8);
+        let params = CouplingParams::DEFAULT;
+        let sender_corners = [
+            DVec3::new(0.0, 0.0, 1.0),
+            DVec3::new(0.8, 0.1, 1.3),
+            DVec3::new(0.1, 0.9, 1.1),
+        ];
+        let normal = (sender_corners[1] - sender_corners[0])
+            .cross(sender_corners[2] - sender_corners[0])
+            .normalize();
+        // Wound so that its normal points up, away from the receiver below.
+        assert!(normal.z > 0.0);
+        let sender = PatchGeom::new(sender_corners, normal).blocking_back(true);
+        let receiver_geom = PatchGeom::new(
+            [
+                DVec3::new(-0.5, -0.5, 0.0),
+                DVec3::new(1.5, -0.2, 0.0),
+                DVec3::new(0.2, 1.5, 0.0),
+            ],
+            DVec3::Z,
+        );
+        for q in [1, 4] {
+            let receiver = Receiver::new(receiver_geom, q);
+            let mut scratch = Coupling::new();
+            couple(&receiver, &sender, &bins, &params, &mut scratch);
+            assert!(scratch.iter().all(|e| e.f_b == 0.0 && e.o_b == 0.0));
+            assert!(scratch.iter().any(|e| e.f_a > 0.0));
+            let mut row = Row::default();
+            faces_coupled(
+                (&receiver, None),
+                (0, &sender, true),
+                &bins,
+                &params,
+                &mut scratch,
+                &mut row,
+            );
+            let mut flipped = Coupling::new();
+            couple(&receiver, &sender.flipped(), &bins, &params, &mut flipped);
+            let links = links_of(&row);
+            assert_eq!(links.len(), 1);
+            assert_eq!(links[0].0, EXACT_SENDER_BACK);
+            let derived = &links[0].1;
+            assert_eq!(derived.len(), flipped.len());
+            for d in derived {
+                let f = flipped.iter().find(|f| f.bin == d.bin).unwrap();
+                assert!((d.f_b - f.f_b).abs() <= 1e-6 * f.f_b, "q {q}: {d:?} {f:?}");
+                assert!((d.o_b - f.o_b).abs() <= 1e-6 * f.o_b, "q {q}: {d:?} {f:?}");
+                assert_eq!((d.f_a, d.o_a), (0.0, 0.0));
+            }
+        }
+    }
 }
