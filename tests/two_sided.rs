@@ -349,3 +349,99 @@ fn relighting_a_two_sided_plate_relights_its_underside() {
         .expect("refused");
     assert!(err.to_string().contains("two-sided"), "{err}");
 }
+
+/// A two-sided room whose faces all point out (as files exported with inconsistent
+/// orientation have them), lit by a two-sided panel hanging 0.3 m under its ceiling. Its
+/// inside is the backs of its walls, which see only other backs: they must still be found
+/// where light arrives (each such back was taken as unlit, and the room came out black).
+#[test]
+fn two_sided_room_facing_out_is_lit_inside() {
+    use glam::DVec3;
+    let v = DVec3::new;
+    let (w, d, h) = (4.0, 3.0, 2.5);
+    let mut tris: Vec<[DVec3; 3]> = Vec::new();
+    let mut albedo = Vec::new();
+    let mut emission = Vec::new();
+    let mut quad = |q: [DVec3; 4], a: f64, e: f64| {
+        for t in [[q[0], q[1], q[2]], [q[0], q[2], q[3]]] {
+            tris.push(t);
+            albedo.push([a; 3]);
+            emission.push([e; 3]);
+        }
+    };
+    // Floor, ceiling and walls, each facing away from the room.
+    quad(
+        [v(0., 0., 0.), v(w, 0., 0.), v(w, 0., d), v(0., 0., d)],
+        0.5,
+        0.0,
+    );
+    quad(
+        [v(0., h, 0.), v(0., h, d), v(w, h, d), v(w, h, 0.)],
+        0.8,
+        0.0,
+    );
+    quad(
+        [v(0., 0., 0.), v(0., h, 0.), v(w, h, 0.), v(w, 0., 0.)],
+        0.6,
+        0.0,
+    );
+    quad(
+        [v(0., 0., d), v(w, 0., d), v(w, h, d), v(0., h, d)],
+        0.6,
+        0.0,
+    );
+    quad(
+        [v(0., 0., 0.), v(0., 0., d), v(0., h, d), v(0., h, 0.)],
+        0.6,
+        0.0,
+    );
+    quad(
+        [v(w, 0., 0.), v(w, h, 0.), v(w, h, d), v(w, 0., d)],
+        0.6,
+        0.0,
+    );
+    // The panel, facing down.
+    let y = h - 0.3;
+    quad(
+        [
+            v(1.5, y, 1.0),
+            v(2.5, y, 1.0),
+            v(2.5, y, 2.0),
+            v(1.5, y, 2.0),
+        ],
+        0.7,
+        10.0,
+    );
+    let mut scene = subdivide(&Scene::from_triangles(&tris, &albedo, &emission), 4);
+    scene.two_sided = vec![true; scene.len()];
+    let room = |t: usize| scene.emission[t][0] == 0.0;
+    let patches = build_patches(&scene, None);
+    let truth = solve_reference(
+        &patches,
+        &ReferenceOptions {
+            spp: 1024,
+            ..ReferenceOptions::default()
+        },
+        &Progress::hidden(),
+    );
+    let h = solve(&scene, SolverKind::Hierarchical);
+    assert_eq!(
+        h.triangle_radiance_back.len(),
+        scene.len(),
+        "the room's backs have no faces"
+    );
+    let inside = mean(&scene, &h.triangle_radiance_back, room);
+    let inside_truth = mean(&scene, &truth.triangle_radiance_back, room);
+    let error = difference(
+        &scene,
+        &h.triangle_radiance_back,
+        &truth.triangle_radiance_back,
+        room,
+    );
+    eprintln!("inside {inside} vs path tracer {inside_truth}, error {error}");
+    assert!(
+        (inside / inside_truth - 1.0).abs() < 0.03,
+        "inside {inside} vs path tracer {inside_truth}"
+    );
+    assert!(error < 0.05, "error {error}");
+}

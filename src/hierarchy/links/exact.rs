@@ -33,8 +33,7 @@ impl Row {
         self.counts.push(entries.len() as u32);
         self.entries.extend_from_slice(entries);
     }
-}
-impl Row {
+
     /// Merges the links of one element pair pushed since link `first` (one per pair of faces,
     /// [`faces_coupled`]) into one link when they can share its faces: every link whose
     /// entries carry the sender's radiance (`f_b`, `o_b`) reads the same sender face, and every
