@@ -86,6 +86,9 @@ pub enum WarningKind {
     NegativeRadiance,
     /// Radiance above the bound the emission and albedos allow.
     OverBound,
+    /// Two-sided emitters face a surface just behind them: the light trapped between is
+    /// cancelled only approximately.
+    CoveredEmitter,
     /// A texture could not be read or applied (no texture coordinates): the material's colour
     /// is used.
     Texture,

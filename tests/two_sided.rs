@@ -350,12 +350,10 @@ fn relighting_a_two_sided_plate_relights_its_underside() {
     assert!(err.to_string().contains("two-sided"), "{err}");
 }
 
-/// A two-sided room whose faces all point out (as files exported with inconsistent
-/// orientation have them), lit by a two-sided panel hanging 0.3 m under its ceiling. Its
-/// inside is the backs of its walls, which see only other backs: they must still be found
-/// where light arrives (each such back was taken as unlit, and the room came out black).
-#[test]
-fn two_sided_room_facing_out_is_lit_inside() {
+/// A 4 x 3 x 2.5 m room whose faces all point out (as files exported with inconsistent
+/// orientation have them), with a 1 x 1 m panel of emission 10 facing down `gap` under its
+/// ceiling, subdivided 4 x 4, every triangle two-sided.
+fn room_facing_out(gap: f64) -> Scene {
     use glam::DVec3;
     let v = DVec3::new;
     let (w, d, h) = (4.0, 3.0, 2.5);
@@ -401,7 +399,7 @@ fn two_sided_room_facing_out_is_lit_inside() {
         0.0,
     );
     // The panel, facing down.
-    let y = h - 0.3;
+    let y = h - gap;
     quad(
         [
             v(1.5, y, 1.0),
@@ -414,34 +412,20 @@ fn two_sided_room_facing_out_is_lit_inside() {
     );
     let mut scene = subdivide(&Scene::from_triangles(&tris, &albedo, &emission), 4);
     scene.two_sided = vec![true; scene.len()];
-    let room = |t: usize| scene.emission[t][0] == 0.0;
-    let patches = build_patches(&scene, None);
-    let truth = solve_reference(
-        &patches,
-        &ReferenceOptions {
-            spp: 1024,
-            ..ReferenceOptions::default()
-        },
-        &Progress::hidden(),
-    );
-    let h = solve(&scene, SolverKind::Hierarchical);
-    assert_eq!(
-        h.triangle_radiance_back.len(),
-        scene.len(),
-        "the room's backs have no faces"
-    );
-    let inside = mean(&scene, &h.triangle_radiance_back, room);
-    let inside_truth = mean(&scene, &truth.triangle_radiance_back, room);
-    let error = difference(
-        &scene,
-        &h.triangle_radiance_back,
-        &truth.triangle_radiance_back,
-        room,
-    );
-    eprintln!("inside {inside} vs path tracer {inside_truth}, error {error}");
-    assert!(
-        (inside / inside_truth - 1.0).abs() < 0.03,
-        "inside {inside} vs path tracer {inside_truth}"
-    );
-    assert!(error < 0.05, "error {error}");
+    scene
+}
+
+/// A two-sided panel hung 1 mm under the ceiling of [`room_facing_out`] lights the gap with its
+/// back, whose light antiradiance cancels only approximately: the solve says so; 0.3 m under it
+/// it does not.
+#[test]
+fn two_sided_emitter_just_under_a_ceiling_is_warned_about() {
+    use antiradiance::error::WarningKind;
+    use antiradiance::solve::warnings::covered_emitter_warning;
+    let covered = |gap: f64| {
+        let patches = build_patches(&room_facing_out(gap), None);
+        covered_emitter_warning(&patches).map(|w| w.kind)
+    };
+    assert_eq!(covered(0.001), Some(WarningKind::CoveredEmitter));
+    assert_eq!(covered(0.3), None);
 }
