@@ -9,8 +9,9 @@ use crate::solve::{budget, direct, SolverKind, SolverOptions};
 
 /// The warnings of one antiradiance solve: memory limit ([`memory_warning`]), iteration cap
 /// ([`cap_warning`]), skipped direct light ([`direct_light_warning`]), capped form-factor rows
-/// ([`capped_rows_warning`]), much negative radiance ([`negative_warning`]) and radiance above
-/// the bound ([`bound_warning`]). A failed solve is not warned about here: it is an error
+/// ([`capped_rows_warning`]), much negative radiance ([`negative_warning`]), radiance above
+/// the bound ([`bound_warning`]) and two-sided emitters just in front of a surface
+/// ([`covered_emitter_warning`]). A failed solve is not warned about here: it is an error
 /// ([`SolveStats::check`]).
 pub fn solve_warnings(
     kind: SolverKind,
