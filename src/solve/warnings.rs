@@ -67,7 +67,7 @@ pub fn covered_emitter_warning(patches: &Patches) -> Option<Warning> {
         .filter(|&p| {
             let (tri, n) = (&patches.corners[p], patches.normal[p]);
             let gap = COVERED_GAP * patches.area[p].sqrt();
-            let centroid = (tri[0] + tri[1] + tri[2]) / 3.0;
+            let centroid = patches.centroid[p];
             let points = [
                 centroid,
                 (centroid + tri[0]) / 2.0,

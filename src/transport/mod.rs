@@ -770,7 +770,7 @@ fn bin_share(omega: f64, omega_bin: f64) -> f64 {
 }
 
 /// The entry of `bin` in `out`, appended (zero) when missing.
-fn entry_of(out: &mut Coupling, bin: u16) -> &mut Entry {
+pub(crate) fn entry_of(out: &mut Coupling, bin: u16) -> &mut Entry {
     let k = match out.iter().position(|e| e.bin == bin) {
         Some(k) => k,
         None => {

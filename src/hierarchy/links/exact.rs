@@ -9,7 +9,7 @@ use super::{EXACT_RECEIVER_BACK, EXACT_SENDER_BACK};
 use crate::geometry::bins::Bins;
 use crate::hierarchy::cost::Meter;
 use crate::hierarchy::ClusterTree;
-use crate::transport::{couple, Coupling, CouplingParams, Entry, PatchGeom, Receiver};
+use crate::transport::{couple, entry_of, Coupling, CouplingParams, Entry, PatchGeom, Receiver};
 
 /// The exact links into one receiver: senders, entry counts, entries.
 #[derive(Default)]
@@ -72,17 +72,7 @@ impl Row {
         }
         let mut merged: Coupling = Coupling::new();
         for e in &self.entries[start..] {
-            let k = merged
-                .iter()
-                .position(|m| m.bin == e.bin)
-                .unwrap_or_else(|| {
-                    merged.push(Entry {
-                        bin: e.bin,
-                        ..Entry::default()
-                    });
-                    merged.len() - 1
-                });
-            let m = &mut merged[k];
+            let m = entry_of(&mut merged, e.bin);
             m.f_b += e.f_b;
             m.f_a += e.f_a;
             m.o_b += e.o_b;
