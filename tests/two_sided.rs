@@ -257,7 +257,7 @@ fn closed_two_sided_tube_under_a_housing_sends_nothing_inward() {
     // The tube along x at height 1, facing outward, capped.
     let (n, r, y, half) = (16, 0.016, 1.0, 0.6);
     let ring = |x: f64, k: usize| {
-        let a = std::f64::consts::TAU * k as f64 / n as f64;
+        let a = std::f64::consts::TAU * (k % n) as f64 / n as f64;
         v(x, y + r * a.cos(), r * a.sin())
     };
     for k in 0..n {
@@ -320,6 +320,13 @@ fn closed_two_sided_tube_under_a_housing_sends_nothing_inward() {
         "floor {floor_b} vs {floor_a}"
     );
     assert!(d < 0.01, "housing {d}");
+    // The tube is a closed object solved facing out: its faces inside report their emission.
+    for t in 2..2 + 4 * n {
+        assert_eq!(
+            b.triangle_radiance_back[t], [1.0; 3],
+            "inside of tube triangle {t}"
+        );
+    }
 }
 
 /// The relighter re-solves two-sided scenes with both faces: half the light gives half the
@@ -428,4 +435,42 @@ fn two_sided_emitter_just_under_a_ceiling_is_warned_about() {
     };
     assert_eq!(covered(0.001), Some(WarningKind::CoveredEmitter));
     assert_eq!(covered(0.3), None);
+}
+
+/// The two-sided room of [`room_facing_out`], its panel 0.3 m under the ceiling. Its inside is
+/// the backs of its walls, which see only other backs: they must still be found where light
+/// arrives (each such back was taken as unlit, and the room came out black).
+#[test]
+fn two_sided_room_facing_out_is_lit_inside() {
+    let scene = room_facing_out(0.3);
+    let room = |t: usize| scene.emission[t][0] == 0.0;
+    let patches = build_patches(&scene, None);
+    let truth = solve_reference(
+        &patches,
+        &ReferenceOptions {
+            spp: 1024,
+            ..ReferenceOptions::default()
+        },
+        &Progress::hidden(),
+    );
+    let h = solve(&scene, SolverKind::Hierarchical);
+    assert_eq!(
+        h.triangle_radiance_back.len(),
+        scene.len(),
+        "the room's backs have no faces"
+    );
+    let inside = mean(&scene, &h.triangle_radiance_back, room);
+    let inside_truth = mean(&scene, &truth.triangle_radiance_back, room);
+    let error = difference(
+        &scene,
+        &h.triangle_radiance_back,
+        &truth.triangle_radiance_back,
+        room,
+    );
+    eprintln!("inside {inside} vs path tracer {inside_truth}, error {error}");
+    assert!(
+        (inside / inside_truth - 1.0).abs() < 0.03,
+        "inside {inside} vs path tracer {inside_truth}"
+    );
+    assert!(error < 0.05, "error {error}");
 }

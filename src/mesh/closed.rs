@@ -14,10 +14,18 @@
 //! An object is *closed* when every edge of its triangles (vertices matched exactly, as an
 //! exporter shares them) joins exactly two of them, and their orientations can be made
 //! consistent; its outside is the side its signed volume says. Its inside is *dark* when no
-//! emitting triangle and no point or spot light lies within its bounds (conservatively: the
-//! bounds, not the volume). Objects with an emitting triangle, or with both one-sided and
-//! two-sided triangles, are left alone. A two-sided object's faces inside are dark too, so it
-//! is solved one-sided, facing out, and its faces are put back after the solve.
+//! other object's emitting triangle and no point or spot light lies within its bounds
+//! (conservatively: the bounds, not the volume). Objects with both one-sided and two-sided
+//! triangles are left alone. A two-sided object's faces inside are dark too, so it is solved
+//! one-sided, facing out, and its faces are put back after the solve.
+//!
+//! An object's own emitting triangles (a closed tube light) light its inside, but nothing
+//! outside sees that light: a two-sided emitting tube is solved as a one-sided one facing out,
+//! its faces inside reported with their emission. Such an object is left alone when its inside
+//! is meant to be seen: a one-sided emitting triangle faces inside, or the object encloses the
+//! whole scene (a furnace). Solved as given, a two-sided tube's faces inside filled it with
+//! light that antiradiance had to cancel everywhere outside it, and where the exposure test
+//! gave them faces the generated classroom's two-sided solve came out 9% off.
 
 use std::collections::HashMap;
 
@@ -45,6 +53,9 @@ pub struct Outward {
     /// The turned patches that were two-sided: their solved front is their back face (see
     /// `Solution::restore_outward` in the solver).
     pub turned_two_sided: Vec<u32>,
+    /// The two-sided emitting patches of those objects: their face inside is reported with
+    /// its emission (what it sends into the object, where nothing outside sees it).
+    pub emitting_inside: Vec<u32>,
 }
 
 impl Patches {
@@ -63,11 +74,15 @@ impl Patches {
         }
         let mut out = self.clone();
         let mut turned_two_sided = Vec::new();
+        let mut emitting_inside = Vec::new();
         let mut turned = 0;
         for p in (0..self.len()).filter(|&p| closed.member[p]) {
             let two_sided = self.is_two_sided(p);
             if two_sided {
                 out.two_sided[p] = false;
+                if self.is_emitter(p) {
+                    emitting_inside.push(p as u32);
+                }
             }
             if !closed.turn[p] {
                 continue;
@@ -83,6 +98,7 @@ impl Patches {
                 }
             } else {
                 out.albedo[p] = [0.0; 3];
+                out.emission[p] = [0.0; 3];
                 if let Some(s) = out.source.get_mut(p) {
                     *s = [0.0; 3];
                 }
@@ -98,6 +114,7 @@ impl Patches {
                 objects: closed.objects,
                 turned,
                 turned_two_sided,
+                emitting_inside,
             },
         ))
     }
@@ -165,7 +182,7 @@ fn edges_of(patches: &Patches) -> (Vec<[u32; 3]>, Vec<Edge>) {
 
 /// 2. Objects: patches joined across edges that join exactly two. Returns per patch its
 ///    object (a root patch), per root whether the object is left alone (an edge with one or
-///    more than two patches, a degenerate patch, an emitter, one- and two-sided patches mixed),
+///    more than two patches, a degenerate patch, one- and two-sided patches mixed),
 ///    and each join as (patch, patch, orientations agree: they run along the edge in opposite
 ///    directions).
 fn join(patches: &Patches, verts: &[[u32; 3]], edges: &[Edge]) -> (Vec<u32>, Vec<bool>, Vec<Join>) {
@@ -197,7 +214,7 @@ fn join(patches: &Patches, verts: &[[u32; 3]], edges: &[Edge]) -> (Vec<u32>, Vec
     for p in 0..n {
         let r = root[p] as usize;
         sides[r] |= if patches.is_two_sided(p) { 2 } else { 1 };
-        if verts[p][0] == u32::MAX || open_edge[p] || patches.is_emitter(p) {
+        if verts[p][0] == u32::MAX || open_edge[p] {
             open[r] = true;
         }
     }
@@ -255,9 +272,10 @@ fn orient(
 }
 
 /// 4. Each closed object's outside from its signed volume (none below [`MIN_VOLUME_RATIO`]);
-///    its inside dark when no emitter and no point or spot light lies within its bounds. The
-///    dark objects' patches are members, those whose orientation disagrees with the outward
-///    one turned.
+///    its inside dark when no other object's emitter and no point or spot light lies within
+///    its bounds, and its own emitters' light is not meant to be seen inside (see the
+///    [module](self)). The dark objects' patches are members, those whose orientation
+///    disagrees with the outward one turned.
 fn outward_if_dark(patches: &Patches, flip: &[Option<bool>], closed: &[&Vec<u32>]) -> Closed {
     let n = patches.len();
     let mut out = Closed {
@@ -265,10 +283,24 @@ fn outward_if_dark(patches: &Patches, flip: &[Option<bool>], closed: &[&Vec<u32>
         member: vec![false; n],
         objects: 0,
     };
-    let emitters: Vec<(DVec3, DVec3)> = (0..n)
+    let emitters: Vec<(usize, (DVec3, DVec3))> = (0..n)
         .filter(|&p| patches.active[p] && patches.is_emitter(p))
-        .map(|p| bounds_of(&patches.corners[p]))
+        .map(|p| (p, bounds_of(&patches.corners[p])))
         .collect();
+    let (scene_lo, scene_hi) = (0..n).filter(|&p| patches.active[p]).fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(lo, hi), p| {
+            let (a, b) = bounds_of(&patches.corners[p]);
+            (lo.min(a), hi.max(b))
+        },
+    );
+    // Per patch, the closed object it belongs to (an index into `closed`).
+    let mut object = vec![usize::MAX; n];
+    for (k, list) in closed.iter().enumerate() {
+        for &p in list.iter() {
+            object[p as usize] = k;
+        }
+    }
     let lamps: Vec<DVec3> = patches
         .lights
         .iter()
@@ -280,7 +312,7 @@ fn outward_if_dark(patches: &Patches, flip: &[Option<bool>], closed: &[&Vec<u32>
     if closed.len() as u64 * (emitters.len() + lamps.len()) as u64 > MAX_BOUND_TESTS {
         return out;
     }
-    for list in closed {
+    for (k, list) in closed.iter().enumerate() {
         let (lo, hi) = list.iter().fold(
             (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
             |(lo, hi), &p| {
@@ -308,16 +340,27 @@ fn outward_if_dark(patches: &Patches, flip: &[Option<bool>], closed: &[&Vec<u32>
         let inside = |x: DVec3| x.cmpge(lo).all() && x.cmple(hi).all();
         let lit_inside = emitters
             .iter()
-            .any(|&(a, b)| a.cmple(hi).all() && b.cmpge(lo).all())
+            .any(|&(p, (a, b))| object[p] != k && a.cmple(hi).all() && b.cmpge(lo).all())
             || lamps.iter().any(|&x| inside(x));
         if lit_inside {
             continue;
         }
-        out.objects += 1;
         // Patches whose orientation disagrees with the outward one face inside.
         let outward_flip = volume < 0.0;
+        let faces_inside = |p: u32| flip[p as usize] != Some(outward_flip);
+        // An object with emitting patches of its own (a closed tube light) sends its inside
+        // nothing that gets out, unless it is meant to be seen from inside: a one-sided
+        // emitting patch faces inside, or the object encloses the whole scene (a furnace).
+        let own_emitters = || list.iter().filter(|&&p| patches.is_emitter(p as usize));
+        if own_emitters().next().is_some()
+            && (own_emitters().any(|&p| faces_inside(p) && !patches.is_two_sided(p as usize))
+                || (lo.cmple(scene_lo).all() && hi.cmpge(scene_hi).all()))
+        {
+            continue;
+        }
+        out.objects += 1;
         for &p in list.iter() {
-            out.turn[p as usize] = flip[p as usize] != Some(outward_flip);
+            out.turn[p as usize] = faces_inside(p);
             out.member[p as usize] = true;
         }
     }
@@ -395,6 +438,53 @@ mod tests {
             scene.triangles[t].swap(1, 2);
         }
         assert_eq!(turned(&scene), ((0..12).collect(), 1));
+    }
+
+    /// [`scene_with_cube`] with the cube emitting, its triangles `reversed` turned around,
+    /// every triangle two-sided or none; `lamp` false drops the emitting quad.
+    fn emitting_cube(reversed: &[usize], two_sided: bool, lamp: bool) -> Scene {
+        let mut scene = scene_with_cube();
+        if !lamp {
+            for list in [&mut scene.albedo, &mut scene.emission] {
+                list.truncate(12);
+            }
+            scene.triangles.truncate(12);
+            scene.material.truncate(12);
+        }
+        for t in 0..12 {
+            scene.emission[t] = [2.0; 3];
+        }
+        for &t in reversed {
+            scene.triangles[t].swap(1, 2);
+        }
+        if two_sided {
+            scene.two_sided = vec![true; scene.triangles.len()];
+        }
+        scene
+    }
+
+    #[test]
+    fn a_two_sided_emitting_cube_is_solved_facing_out() {
+        let scene = emitting_cube(&[1, 4, 7], true, true);
+        assert_eq!(turned(&scene), (vec![1, 4, 7], 1));
+        let patches = crate::mesh::build_patches(&scene, None);
+        let (out, what) = patches.closed_objects_outward().unwrap();
+        assert_eq!(what.turned_two_sided, vec![1, 4, 7]);
+        assert_eq!(what.emitting_inside, (0..12).collect::<Vec<u32>>());
+        for t in 0..12 {
+            assert!(!out.is_two_sided(t));
+            assert_eq!(out.emission[t], patches.emission[t], "both faces emit");
+        }
+    }
+
+    #[test]
+    fn a_one_sided_cube_emitting_inward_or_enclosing_the_scene_is_left_alone() {
+        // Outward: nothing to turn, its light all goes out.
+        assert_eq!(turned(&emitting_cube(&[], false, true)), (vec![], 1));
+        // A one-sided face emitting inside: that light is meant to be seen there.
+        assert_eq!(turned(&emitting_cube(&[4], false, true)), (vec![], 0));
+        // A two-sided emitting cube that is the whole scene is a furnace, seen from inside.
+        assert_eq!(turned(&emitting_cube(&[4], true, false)), (vec![], 0));
     }
 
     #[test]

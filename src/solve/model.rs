@@ -34,6 +34,10 @@ pub const BACK_RAYS_MAX: usize = 16;
 /// count as exposed.
 pub const EXPOSED_SHARE: f64 = 0.25;
 
+/// How far behind a patch's plane a back ray's hit must lie, in [`crate::geometry::SCENE_EPS`],
+/// to count in [`two_sided_exposed`] (its rays start `2 SCENE_EPS` in front of the plane).
+const BEHIND_HIT: f64 = 4.0;
+
 /// How far behind a patch's plane (unit frame) the scene's box may reach with the patch still
 /// taken as having nothing behind it ([`exposed_backs`]): rounding only.
 const BEHIND_NOTHING: f64 = 1e-12;
@@ -65,6 +69,9 @@ const BEHIND_NOTHING: f64 = 1e-12;
 /// -0.85%) from its reference. Where the floor under the box is one patch with
 /// the floor around it (the 46-triangle Cornell box), the false positive stays: it costs
 /// two-sided bins, not light.
+///
+/// A two-sided patch's back is also exposed where light reaches it across other two-sided
+/// surfaces ([`two_sided_exposed`]).
 pub fn exposed_backs(patches: &Patches) -> Vec<bool> {
     let twinned = back_to_back_twins(patches);
     let scene = RayScene::new(&patches.corners, &patches.active);
@@ -96,23 +103,14 @@ pub fn exposed_backs(patches: &Patches) -> Vec<bool> {
         .map(|p| patches.active[p] && !twinned[p] && !nothing_behind(p))
         .collect();
     // Hits on fronts that are not dark (`DarkFronts`: the floor under an open-bottomed box)
-    // first; then, for two-sided patches still unexposed, hits on the back faces of two-sided
-    // patches found exposed (lit) count too.
+    // first; then, for two-sided patches still unexposed, light arriving across other
+    // two-sided surfaces ([`two_sided_exposed`]).
     let dark = DarkFronts::new(patches, &scene);
     let lit_front =
         |hit: usize, dir: DVec3| patches.normal[hit].dot(dir) < 0.0 && !dark.is_dark(hit);
     let mut exposed = exposed_where(patches, &scene, &candidates, lit_front);
     if patches.has_two_sided() {
-        let again: Vec<bool> = (0..patches.len())
-            .map(|p| candidates[p] && !exposed[p] && patches.is_two_sided(p))
-            .collect();
-        let first = exposed.clone();
-        let second = exposed_where(patches, &scene, &again, |hit, dir| {
-            lit_front(hit, dir) || (patches.is_two_sided(hit) && first[hit])
-        });
-        for (e, s) in exposed.iter_mut().zip(second) {
-            *e |= s;
-        }
+        two_sided_exposed(patches, &scene, &candidates, &lit_front, &mut exposed);
     }
     exposed
 }
@@ -205,6 +203,82 @@ fn stratified_ray(
     let org = point_on_triangle(tri, u1, u2) + n * (2.0 * crate::geometry::SCENE_EPS);
     let dir = cosine_direction(axis, rng.next_f64(), rng.next_f64());
     (org, dir)
+}
+
+/// The second step of [`exposed_backs`] for the two-sided candidates it left unexposed: such a
+/// back is exposed when one of its rays meets an emitter's front (direct light reaches it), or
+/// when at least [`EXPOSED_SHARE`] of those that meet a surface meet a lit front or a
+/// two-sided patch whose back is exposed (an emitter's back too: it emits only where its back
+/// face exists), repeated until no more backs are found (the rays are traced once); the inside
+/// of a closed object, whose rays meet only its own backs, stays unexposed (closed objects are
+/// turned to face out before this test, `mesh::closed`; the inside of a closed tube light was
+/// once reached from caps whose backs the first step found exposed, and, filled with its own
+/// light, took the generated classroom's two-sided solve 9% off). A two-sided room whose walls face out sees
+/// only their backs from inside: the backs that see its light are found first, and the light
+/// spreads from them.
+/// Counting only backs found by the first step, none was, and the room came out black
+/// (`two_sided_room_facing_out_is_lit_inside` in `tests/two_sided.rs`); counting every
+/// two-sided patch met, whether lit or not, b90_office's two-sided solve diverged.
+fn two_sided_exposed(
+    patches: &Patches,
+    scene: &RayScene,
+    candidates: &[bool],
+    lit_front: &(impl Fn(usize, DVec3) -> bool + Sync),
+    exposed: &mut [bool],
+) {
+    let active = patches.active_count().max(1);
+    let rays = (BACK_RAY_BUDGET / active).clamp(BACK_RAYS_MIN, BACK_RAYS_MAX);
+    let side = (rays as f64).sqrt().ceil() as usize;
+    let emits_toward =
+        |hit: usize, dir: DVec3| patches.is_emitter(hit) && patches.normal[hit].dot(dir) < 0.0;
+    // Per open candidate: whether a ray met an emitting face, and the patches its rays met
+    // with whether each met a lit front.
+    type Met = (bool, Vec<(u32, bool)>);
+    let open: Vec<usize> = (0..patches.len())
+        .filter(|&p| candidates[p] && !exposed[p] && patches.is_two_sided(p))
+        .collect();
+    let met: Vec<Met> = open
+        .par_iter()
+        .map(|&p| {
+            let (tri, n) = (&patches.corners[p], patches.normal[p]);
+            let mut rng = Rng::new(0x6261_636b, p as u64);
+            let mut hits = Vec::with_capacity(rays);
+            for k in 0..rays {
+                let (org, dir) = stratified_ray(tri, n, -n, (k, side), &mut rng);
+                // A ray started in front of the patch can meet a neighbour sharing its edge
+                // before it crosses the patch's plane (the faces of a thin tube): only what
+                // lies behind the plane counts.
+                let behind =
+                    |x: DVec3| n.dot(x - tri[0]) < -BEHIND_HIT * crate::geometry::SCENE_EPS;
+                if let Some(hit) = scene.closest(org, dir, p).filter(|hit| behind(hit.point)) {
+                    if emits_toward(hit.patch, dir) {
+                        return (true, Vec::new());
+                    }
+                    hits.push((hit.patch as u32, lit_front(hit.patch, dir)));
+                }
+            }
+            (false, hits)
+        })
+        .collect();
+    let mut changed = true;
+    while changed {
+        changed = false;
+        for (&p, (direct, hits)) in open.iter().zip(&met) {
+            if exposed[p] {
+                continue;
+            }
+            let lit = hits
+                .iter()
+                .filter(|&&(hit, front)| {
+                    front || (patches.is_two_sided(hit as usize) && exposed[hit as usize])
+                })
+                .count();
+            if *direct || (lit > 0 && lit as f64 >= EXPOSED_SHARE * hits.len() as f64) {
+                exposed[p] = true;
+                changed = true;
+            }
+        }
+    }
 }
 
 /// [`exposed_backs`]'s ray test for the patches marked in `candidates` (false for the others),

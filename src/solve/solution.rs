@@ -265,8 +265,9 @@ impl Solution {
     /// Puts back the faces of this solution, solved on the patches
     /// [`Patches::closed_objects_outward`] made from `patches` (what changed: `outward`): a
     /// turned two-sided patch's solved front is its back face, and its front (inside) has the
-    /// dark inside's radiance, its emission 0; every other patch of `patches` with two faces
-    /// keeps what was solved (0 behind for the objects' patches made one-sided). Call before
+    /// dark inside's radiance, 0; every other patch of `patches` with two faces keeps what was
+    /// solved (0 behind for the objects' patches made one-sided). A two-sided emitting patch of
+    /// such an object has its emission on its face inside (scene units). Call before
     /// [`Solution::settle_inactive`], which remakes the per-triangle values.
     pub fn restore_outward(&mut self, outward: &Outward, patches: &Patches) {
         if !patches.has_two_sided() {
@@ -278,6 +279,15 @@ impl Solution {
             let p = p as usize;
             self.patch_radiance_back[p] = self.patch_radiance[p];
             self.patch_radiance[p] = [0.0; 3];
+        }
+        for &p in &outward.emitting_inside {
+            let p = p as usize;
+            let inside = if outward.turned_two_sided.binary_search(&(p as u32)).is_ok() {
+                &mut self.patch_radiance[p]
+            } else {
+                &mut self.patch_radiance_back[p]
+            };
+            *inside = patches.emission[p].map(|e| sanitize(e * patches.emission_scale));
         }
     }
 
