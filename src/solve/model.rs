@@ -35,7 +35,8 @@ pub const BACK_RAYS_MAX: usize = 16;
 pub const EXPOSED_SHARE: f64 = 0.25;
 
 /// How far behind a patch's plane a back ray's hit must lie, in [`crate::geometry::SCENE_EPS`],
-/// to count in [`two_sided_exposed`] (its rays start `2 SCENE_EPS` in front of the plane).
+/// to count in [`exposed_backs`] (its rays start `2 SCENE_EPS` in front of the plane, and can
+/// meet a neighbour sharing the patch's edge before they cross it).
 const BEHIND_HIT: f64 = 4.0;
 
 /// How far behind a patch's plane (unit frame) the scene's box may reach with the patch still
@@ -51,7 +52,10 @@ const BEHIND_NOTHING: f64 = 1e-12;
 /// of one polygon), blinds. Their backs are lit directly, and without blocking there light
 /// leaks through them. The test is geometric, so it needs no consistent topology: from
 /// stratified points on the patch, cosine-distributed rays into its back hemisphere (from
-/// `2 SCENE_EPS` in front of it); a patch with a back-to-back twin (the same corners in reverse
+/// `2 SCENE_EPS` in front of it; only what they meet behind its plane counts, not a neighbour
+/// sharing its edge met before they cross it: the caps of a thin tube, whose rays met the
+/// tube's sides at the rim, were found exposed; without them b90_office blocks at 4,093
+/// patches instead of 7,221, 31.2M links instead of 33.1M); a patch with a back-to-back twin (the same corners in reverse
 /// order) is not exposed: the twin's front covers its back;
 /// the back is exposed when at least [`EXPOSED_SHARE`] of those that meet a surface first meet
 /// the front of another (they see open space that light crosses), not when they meet backs
@@ -303,7 +307,9 @@ fn exposed_where(
             let (mut fronts, mut hits) = (0usize, 0usize);
             for k in 0..rays {
                 let (org, dir) = stratified_ray(tri, n, -n, (k, side), &mut rng);
-                if let Some(hit) = scene.closest(org, dir, p) {
+                let behind =
+                    |x: DVec3| n.dot(x - tri[0]) < -BEHIND_HIT * crate::geometry::SCENE_EPS;
+                if let Some(hit) = scene.closest(org, dir, p).filter(|hit| behind(hit.point)) {
                     hits += 1;
                     if lit(hit.patch, dir) {
                         fronts += 1;
