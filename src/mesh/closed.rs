@@ -22,8 +22,9 @@
 //! An object's own emitting triangles (a closed tube light) light its inside, but nothing
 //! outside sees that light: a two-sided emitting tube is solved as a one-sided one facing out,
 //! its faces inside reported with their emission. Such an object is left alone when its inside
-//! is meant to be seen: a one-sided emitting triangle faces inside, or the object encloses the
-//! whole scene (a furnace). Solved as given, a two-sided tube's faces inside filled it with
+//! is meant to be seen: a one-sided emitting triangle faces inside, the object encloses the
+//! whole scene (a furnace), or another object's triangle lies within its bounds (a room whose
+//! ceiling lights are part of its mesh). Solved as given, a two-sided tube's faces inside filled it with
 //! light that antiradiance had to cancel everywhere outside it, and where the exposure test
 //! gave them faces the generated classroom's two-sided solve came out 9% off.
 
@@ -41,6 +42,8 @@ use crate::union_find::UnionFind;
 pub const MIN_VOLUME_RATIO: f64 = 1e-4;
 
 /// Most (object, emitter) bound tests; above it no object is turned (the test is quadratic).
+/// Objects with emitters of their own are tested against every patch, and left alone when
+/// those tests number more.
 const MAX_BOUND_TESTS: u64 = 100_000_000;
 
 /// What [`Patches::closed_objects_outward`] changed.
@@ -312,6 +315,13 @@ fn outward_if_dark(patches: &Patches, flip: &[Option<bool>], closed: &[&Vec<u32>
     if closed.len() as u64 * (emitters.len() + lamps.len()) as u64 > MAX_BOUND_TESTS {
         return out;
     }
+    // Objects with emitters of their own are tested against every patch (left alone when
+    // that takes more than MAX_BOUND_TESTS).
+    let own_emitting = closed
+        .iter()
+        .filter(|list| list.iter().any(|&p| patches.is_emitter(p as usize)))
+        .count();
+    let own_tests_fit = own_emitting as u64 * n as u64 <= MAX_BOUND_TESTS;
     for (k, list) in closed.iter().enumerate() {
         let (lo, hi) = list.iter().fold(
             (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
@@ -350,11 +360,15 @@ fn outward_if_dark(patches: &Patches, flip: &[Option<bool>], closed: &[&Vec<u32>
         let faces_inside = |p: u32| flip[p as usize] != Some(outward_flip);
         // An object with emitting patches of its own (a closed tube light) sends its inside
         // nothing that gets out, unless it is meant to be seen from inside: a one-sided
-        // emitting patch faces inside, or the object encloses the whole scene (a furnace).
+        // emitting patch faces inside, the object encloses the whole scene (a furnace), or
+        // another object's patch lies within its bounds (a room whose ceiling lights emit).
         let own_emitters = || list.iter().filter(|&&p| patches.is_emitter(p as usize));
         if own_emitters().next().is_some()
-            && (own_emitters().any(|&p| faces_inside(p) && !patches.is_two_sided(p as usize))
-                || (lo.cmple(scene_lo).all() && hi.cmpge(scene_hi).all()))
+            && (!own_tests_fit
+                || own_emitters().any(|&p| faces_inside(p) && !patches.is_two_sided(p as usize))
+                || (lo.cmple(scene_lo).all() && hi.cmpge(scene_hi).all())
+                || (0..n)
+                    .any(|p| patches.active[p] && object[p] != k && inside(patches.centroid[p])))
         {
             continue;
         }
@@ -485,6 +499,18 @@ mod tests {
         assert_eq!(turned(&emitting_cube(&[4], false, true)), (vec![], 0));
         // A two-sided emitting cube that is the whole scene is a furnace, seen from inside.
         assert_eq!(turned(&emitting_cube(&[4], true, false)), (vec![], 0));
+        // One with something inside it is a room whose lights are part of its mesh.
+        let mut room = emitting_cube(&[4], true, true);
+        let base = room.positions.len() as u32;
+        for p in [[0.2, 0.1, 0.2], [0.8, 0.1, 0.2], [0.5, 0.1, 0.8]] {
+            room.positions.push(DVec3::from_array(p));
+        }
+        room.triangles.push([base, base + 2, base + 1]);
+        room.albedo.push([0.5; 3]);
+        room.emission.push([0.0; 3]);
+        room.material.push(None);
+        room.two_sided.push(true);
+        assert_eq!(turned(&room), (vec![], 0));
     }
 
     #[test]
