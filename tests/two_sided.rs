@@ -423,18 +423,63 @@ fn room_facing_out(gap: f64) -> Scene {
 }
 
 /// A two-sided panel hung 1 mm under the ceiling of [`room_facing_out`] lights the gap with its
-/// back, whose light antiradiance cancels only approximately: the solve says so; 0.3 m under it
-/// it does not.
+/// back. Solved with the room, that light leaked past the antiradiance meant to cancel it (a
+/// plain room 21% from its path tracer); solved on its own as a thin cavity, the room's inside
+/// and the ceiling over the panel match the path tracer. The warning for such emitters is left
+/// to solves that do not do that; 0.3 m under the ceiling there is no cavity.
 #[test]
-fn two_sided_emitter_just_under_a_ceiling_is_warned_about() {
+fn two_sided_emitter_just_under_a_ceiling_is_solved_as_a_thin_cavity() {
     use antiradiance::error::WarningKind;
+    use antiradiance::solve::cavity::Cavities;
+    use antiradiance::solve::solution::SolveStats;
     use antiradiance::solve::warnings::covered_emitter_warning;
-    let covered = |gap: f64| {
-        let patches = build_patches(&room_facing_out(gap), None);
-        covered_emitter_warning(&patches).map(|w| w.kind)
-    };
-    assert_eq!(covered(0.001), Some(WarningKind::CoveredEmitter));
-    assert_eq!(covered(0.3), None);
+    let scene = room_facing_out(0.001);
+    let patches = build_patches(&scene, None);
+    let panel = scene.emission.iter().filter(|e| e[0] > 0.0).count();
+    assert_eq!(Cavities::find(&patches).map(|c| c.len()), Some(panel));
+    assert!(Cavities::find(&build_patches(&room_facing_out(0.3), None)).is_none());
+    let unmodelled = covered_emitter_warning(&patches, &SolveStats::default());
+    assert_eq!(
+        unmodelled.map(|w| w.kind),
+        Some(WarningKind::CoveredEmitter)
+    );
+
+    let h = solve(&scene, SolverKind::Hierarchical);
+    assert_eq!(h.stats.covered_emitters, panel as u64);
+    assert!(covered_emitter_warning(&patches, &h.stats).is_none());
+    let truth = solve_reference(
+        &patches,
+        &ReferenceOptions {
+            spp: 1024,
+            ..ReferenceOptions::default()
+        },
+        &Progress::hidden(),
+    );
+    let room = |t: usize| scene.emission[t][0] == 0.0;
+    let inside = mean(&scene, &h.triangle_radiance_back, room);
+    let inside_truth = mean(&scene, &truth.triangle_radiance_back, room);
+    let error = difference(
+        &scene,
+        &h.triangle_radiance_back,
+        &truth.triangle_radiance_back,
+        room,
+    );
+    // The panel's backs: the gap's light, many times the room's.
+    let emitter = |t: usize| !room(t);
+    let back = mean(&scene, &h.triangle_radiance_back, emitter);
+    let back_truth = mean(&scene, &truth.triangle_radiance_back, emitter);
+    eprintln!(
+        "inside {inside} vs path tracer {inside_truth}, error {error}; panel backs {back} vs {back_truth}"
+    );
+    assert!(
+        (inside / inside_truth - 1.0).abs() < 0.05,
+        "inside {inside} vs path tracer {inside_truth}"
+    );
+    assert!(error < 0.08, "error {error}");
+    assert!(
+        (back / back_truth - 1.0).abs() < 0.05,
+        "panel backs {back} vs {back_truth}"
+    );
 }
 
 /// The two-sided room of [`room_facing_out`], its panel 0.3 m under the ceiling. Its inside is

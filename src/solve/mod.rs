@@ -5,6 +5,7 @@
 
 pub mod accelerate;
 pub mod budget;
+pub mod cavity;
 pub mod convergence;
 pub mod dense;
 pub mod direct;
@@ -101,6 +102,16 @@ pub fn run(
     options: &SolverOptions,
     progress: &Progress,
 ) -> Result<Solution> {
+    // Two-sided emitters just in front of a surface: their gaps are solved on their own, the
+    // rest of the scene with them one-sided (see `cavity`).
+    let cavities = if options.antiradiance {
+        cavity::Cavities::find(patches)
+    } else {
+        None
+    };
+    let opened = cavities.as_ref().map(|c| c.opened(patches));
+    let patches_in = patches;
+    let patches = opened.as_ref().unwrap_or(patches_in);
     // Closed objects with a dark inside are solved facing out (see `mesh::closed`), when
     // backs exposed to light are blocked (the handling of files as found).
     let outward = if options.antiradiance && options.block_exposed_backs && !options.two_sided {
@@ -127,8 +138,12 @@ pub fn run(
             model.turned_outward_patches = turned.turned;
         }
     }
+    if let Some(cavities) = &cavities {
+        cavities.fill(&mut solution, patches_in);
+        solution.stats.covered_emitters = cavities.len() as u64;
+    }
     // Degenerate and duplicate triangles' patches get the values the model fixes for them,
     // whatever the solver left there.
-    solution.settle_inactive(patches);
+    solution.settle_inactive(patches_in);
     Ok(solution)
 }

@@ -75,7 +75,7 @@ const BEHIND_NOTHING: f64 = 1e-12;
 /// two-sided bins, not light.
 ///
 /// A two-sided patch's back is also exposed where light reaches it across other two-sided
-/// surfaces ([`two_sided_exposed`]).
+/// surfaces (`two_sided_exposed`).
 pub fn exposed_backs(patches: &Patches) -> Vec<bool> {
     let twinned = back_to_back_twins(patches);
     let scene = RayScene::new(&patches.corners, &patches.active);

@@ -77,6 +77,9 @@ pub struct SolveStats {
     /// [`SolveStats::check`] turns it into an error. Left out of the JSON when `None`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub failure: Option<crate::solve::health::SolveFailure>,
+    /// Two-sided emitters just in front of a surface whose gap was solved on its own
+    /// ([`crate::solve::cavity`]).
+    pub covered_emitters: u64,
     /// Transport links (dense: ordered patch pairs that exchange anything).
     pub links: u64,
     /// Bytes held by the solver's main arrays at their peak.

@@ -26,73 +26,48 @@ pub fn solve_warnings(
         .chain(capped_rows_warning(kind.name(), stats))
         .chain(negative_warning(kind.name(), stats, options))
         .chain(bound_warning(kind.name(), stats))
-        .chain(covered_emitter_warning(patches))
+        .chain(covered_emitter_warning(patches, stats))
         .collect()
 }
-
-/// How close a surface behind a two-sided emitter makes a cavity that
-/// [`covered_emitter_warning`] warns about, as a share of the emitter's size (the square root
-/// of its area).
-pub const COVERED_GAP: f64 = 0.02;
 
 /// Share of the emitted power (area times largest channel of emission) in covered emitters
 /// above which [`covered_emitter_warning`] warns.
 pub const COVERED_POWER: f64 = 0.01;
 
-/// The warning for two-sided emitters whose back faces a surface closer than [`COVERED_GAP`]
-/// of their size (a luminaire's panel hung just under a ceiling), when they carry more than
-/// [`COVERED_POWER`] of the emitted power; `None` otherwise. Their backs light the gap, whose
-/// light is trapped there; antiradiance cancels it only approximately, so the rest of the
-/// scene comes out too bright: b90_office two-sided, whose fluorescent panels hang 0.76 mm
-/// under its ceiling, 17.5% from its path-traced reference (bias +17%); a panel 0.76 mm under
-/// the ceiling of a plain room 21% (bias +16%), 0.3 m under it 0.7%. An emitter is covered when rays
-/// straight back from four points of it all meet a surface that does not emit within the gap.
-pub fn covered_emitter_warning(patches: &Patches) -> Option<Warning> {
-    use crate::geometry::raytrace::RayScene;
-    use rayon::prelude::*;
-    let power =
-        |p: usize| patches.area[p] * patches.emission[p].iter().copied().fold(0.0, f64::max);
-    let emitters: Vec<usize> = (0..patches.len())
-        .filter(|&p| patches.active[p] && patches.is_emitter(p))
-        .collect();
-    if !emitters.iter().any(|&p| patches.is_two_sided(p)) {
+/// The warning for a solve that left two-sided emitters whose back faces a surface closer than
+/// [`crate::solve::cavity::COVERED_GAP`] of their size (a luminaire's panel hung just under a
+/// ceiling) in the scene, when they carry more than [`COVERED_POWER`] of the emitted power;
+/// `None` otherwise, and when the solve solved their gaps on their own
+/// ([`SolveStats::covered_emitters`], [`crate::solve::cavity`]: every solve but the
+/// relighter's). Their backs light the gap, whose light is trapped there; antiradiance cancels
+/// it only approximately, so the rest of the scene comes out too bright: b90_office two-sided,
+/// whose fluorescent panels hang 0.76 mm under its ceiling, 17.6% from its path-traced
+/// reference (bias +17%) solved with the panels as given.
+pub fn covered_emitter_warning(patches: &Patches, stats: &SolveStats) -> Option<Warning> {
+    if stats.covered_emitters > 0 {
         return None;
     }
-    let total: f64 = emitters.iter().map(|&p| power(p)).sum();
-    let scene = RayScene::new(&patches.corners, &patches.active);
-    let covered: Vec<usize> = emitters
-        .par_iter()
-        .copied()
-        .filter(|&p| patches.is_two_sided(p))
-        .filter(|&p| {
-            let (tri, n) = (&patches.corners[p], patches.normal[p]);
-            let gap = COVERED_GAP * patches.area[p].sqrt();
-            let centroid = patches.centroid[p];
-            let points = [
-                centroid,
-                (centroid + tri[0]) / 2.0,
-                (centroid + tri[1]) / 2.0,
-                (centroid + tri[2]) / 2.0,
-            ];
-            // Tilted off the normal by 0.01 rad: a ray exactly along an axis can slip past a
-            // flat box of the BVH.
-            let back = (-n + 0.01 * (tri[1] - tri[0]).normalize()).normalize();
-            points.iter().all(|&x| {
-                scene
-                    .closest(x, back, p)
-                    .is_some_and(|hit| hit.t < gap && !patches.is_emitter(hit.patch))
-            })
-        })
-        .collect();
-    let share = covered.iter().map(|&p| power(p)).sum::<f64>() / total;
+    let cavities = crate::solve::cavity::Cavities::find(patches)?;
+    let power =
+        |p: usize| patches.area[p] * patches.emission[p].iter().copied().fold(0.0, f64::max);
+    let total: f64 = (0..patches.len())
+        .filter(|&p| patches.active[p] && patches.is_emitter(p))
+        .map(power)
+        .sum();
+    let share = cavities
+        .covered
+        .iter()
+        .map(|&(p, _)| power(p as usize))
+        .sum::<f64>()
+        / total;
     (share > COVERED_POWER).then(|| {
         Warning::new(
             WarningKind::CoveredEmitter,
             format!(
                 "{} ({:.0}% of the emitted power) face a surface closer than {:.0}% of their size behind them: the light their backs send into that gap is trapped there, which antiradiance cancels only approximately, so the rest of the scene can come out too bright (make such emitters one-sided: --two-sided-material for the other materials)",
-                plural(covered.len(), "two-sided emitting triangle", "two-sided emitting triangles"),
+                plural(cavities.len(), "two-sided emitting triangle", "two-sided emitting triangles"),
                 100.0 * share,
-                100.0 * COVERED_GAP
+                100.0 * crate::solve::cavity::COVERED_GAP
             ),
         )
     })
