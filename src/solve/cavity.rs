@@ -54,49 +54,100 @@ pub struct Cover {
     pub front: bool,
 }
 
-/// The covered two-sided emitters of a scene and what covers them.
+/// An emitter with a covered face, and what covers it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Trapped {
+    /// The emitting patch.
+    pub emitter: u32,
+    /// The covers of its front, when its front is covered.
+    pub front: Option<Vec<Cover>>,
+    /// The covers of its back, when it is two-sided and its back is covered.
+    pub back: Option<Vec<Cover>>,
+    /// It is two-sided.
+    pub two_sided: bool,
+}
+
+impl Trapped {
+    /// Its front is covered and it is two-sided with a free back: it is solved turned around,
+    /// one-sided (its back becomes the solved front).
+    fn turned(&self) -> bool {
+        self.front.is_some() && self.back.is_none() && self.two_sided
+    }
+}
+
+/// The emitters of a scene with a face just in front of a surface, and what covers them.
 #[derive(Clone, Debug, Default)]
 pub struct Cavities {
-    /// Per covered emitter patch, its covers.
-    pub covered: Vec<(u32, Vec<Cover>)>,
+    /// The emitters with a covered face.
+    pub trapped: Vec<Trapped>,
 }
 
 impl Cavities {
-    /// The two-sided emitters of `patches` whose back faces a surface that does not emit closer
-    /// than [`COVERED_GAP`] of their size, at every one of a grid of points; `None` when there
-    /// are none.
+    /// The emitters of `patches` with a face (the front, or a two-sided emitter's back) that
+    /// faces a surface that does not emit closer than [`COVERED_GAP`] of their size, at every
+    /// one of a grid of points; `None` when there are none.
     pub fn find(patches: &Patches) -> Option<Cavities> {
         let emitters: Vec<usize> = (0..patches.len())
-            .filter(|&p| patches.active[p] && patches.is_emitter(p) && patches.is_two_sided(p))
+            .filter(|&p| patches.active[p] && patches.is_emitter(p))
             .collect();
         if emitters.is_empty() {
             return None;
         }
         let scene = RayScene::new(&patches.corners, &patches.active);
-        let covered: Vec<(u32, Vec<Cover>)> = emitters
+        let trapped: Vec<Trapped> = emitters
             .par_iter()
-            .filter_map(|&p| covers_of(patches, &scene, p).map(|covers| (p as u32, covers)))
+            .filter_map(|&p| {
+                let n = patches.normal[p];
+                let front = covers_of(patches, &scene, p, n);
+                let back = if patches.is_two_sided(p) {
+                    covers_of(patches, &scene, p, -n)
+                } else {
+                    None
+                };
+                (front.is_some() || back.is_some()).then_some(Trapped {
+                    emitter: p as u32,
+                    front,
+                    back,
+                    two_sided: patches.is_two_sided(p),
+                })
+            })
             .collect();
-        (!covered.is_empty()).then_some(Cavities { covered })
+        (!trapped.is_empty()).then_some(Cavities { trapped })
     }
 
-    /// The number of covered emitters.
+    /// The number of emitters with a covered face.
     pub fn len(&self) -> usize {
-        self.covered.len()
+        self.trapped.len()
     }
 
-    /// True when no emitter is covered.
+    /// True when there are none.
     pub fn is_empty(&self) -> bool {
-        self.covered.is_empty()
+        self.trapped.is_empty()
     }
 
-    /// `patches` with the covered emitters one-sided: what the rest of the scene is solved
-    /// with.
+    /// `patches` as the rest of the scene is solved: an emitter whose back alone is covered
+    /// one-sided; one whose front alone is covered, two-sided, turned around and one-sided
+    /// (its back's light goes out); one with no face that sends light out black and dark.
     pub fn opened(&self, patches: &Patches) -> Patches {
         let mut out = patches.clone();
-        for &(p, _) in &self.covered {
-            if let Some(t) = out.two_sided.get_mut(p as usize) {
-                *t = false;
+        for t in &self.trapped {
+            let p = t.emitter as usize;
+            if let Some(two) = out.two_sided.get_mut(p) {
+                *two = false;
+            }
+            if t.turned() {
+                let [a, b, c] = out.corners[p];
+                out.corners[p] = [a, c, b];
+                out.normal[p] = -out.normal[p];
+                if let Some(s) = out.source.get_mut(p) {
+                    *s = patches.source_back.get(p).copied().unwrap_or([0.0; 3]);
+                }
+            } else if t.front.is_some() {
+                out.emission[p] = [0.0; 3];
+                out.albedo[p] = [0.0; 3];
+                if let Some(s) = out.source.get_mut(p) {
+                    *s = [0.0; 3];
+                }
             }
         }
         if out.two_sided.iter().all(|&t| !t) {
@@ -106,10 +157,10 @@ impl Cavities {
         out
     }
 
-    /// Gives the covered emitters' backs and their covers' faces toward the gaps their
-    /// radiance (see the [module](self)), in `solution`, solved on [`Cavities::opened`] of
-    /// `patches`. Call before [`Solution::settle_inactive`], which remakes the per-triangle
-    /// values.
+    /// Gives the emitters' covered faces and their covers' faces toward the gaps their
+    /// radiance (see the [module](self)), and a turned emitter's back the radiance solved for
+    /// it, in `solution`, solved on [`Cavities::opened`] of `patches`. Call before
+    /// [`Solution::settle_inactive`], which remakes the per-triangle values.
     pub fn fill(&self, solution: &mut Solution, patches: &Patches) {
         let n = patches.len();
         if solution.patch_radiance.len() != n {
@@ -119,40 +170,53 @@ impl Cavities {
         // Per cover and face (front, back): covered area and the area-weighted B_cover.
         let mut area = vec![[0.0f64; 2]; n];
         let mut sum = vec![[[0.0f64; 3]; 2]; n];
-        for (e, covers) in &self.covered {
-            let e = *e as usize;
+        for t in &self.trapped {
+            let e = t.emitter as usize;
             let emission = patches.emission[e].map(|x| x * patches.emission_scale);
             let rho_e = patches.albedo[e];
-            let mut back = [0.0f64; 3];
-            for &Cover {
-                patch: q,
-                share,
-                front,
-            } in covers
-            {
-                let q = q as usize;
-                let reflects = front || patches.is_two_sided(q);
-                let rho_c = if reflects {
-                    patches.albedo[q]
-                } else {
-                    [0.0; 3]
+            if t.turned() {
+                solution.patch_radiance_back[e] = solution.patch_radiance[e];
+            }
+            for (covers, face) in [(&t.front, 0), (&t.back, 1)] {
+                let Some(covers) = covers else {
+                    continue;
                 };
-                let cover: [f64; 3] = std::array::from_fn(|c| {
-                    rho_c[c] * emission[c] / (1.0 - rho_c[c] * rho_e[c]).max(1e-9)
-                });
-                for c in 0..3 {
-                    back[c] += share * (emission[c] + rho_e[c] * cover[c]);
-                }
-                if reflects {
-                    let face = usize::from(!front);
-                    let a = share * patches.area[e];
-                    area[q][face] += a;
+                let mut gap_face = [0.0f64; 3];
+                for &Cover {
+                    patch: q,
+                    share,
+                    front,
+                } in covers
+                {
+                    let q = q as usize;
+                    let reflects = front || patches.is_two_sided(q);
+                    let rho_c = if reflects {
+                        patches.albedo[q]
+                    } else {
+                        [0.0; 3]
+                    };
+                    let cover: [f64; 3] = std::array::from_fn(|c| {
+                        rho_c[c] * emission[c] / (1.0 - rho_c[c] * rho_e[c]).max(1e-9)
+                    });
                     for c in 0..3 {
-                        sum[q][face][c] += a * cover[c];
+                        gap_face[c] += share * (emission[c] + rho_e[c] * cover[c]);
+                    }
+                    if reflects {
+                        let cover_face = usize::from(!front);
+                        let a = share * patches.area[e];
+                        area[q][cover_face] += a;
+                        for c in 0..3 {
+                            sum[q][cover_face][c] += a * cover[c];
+                        }
                     }
                 }
+                let solved = if face == 0 {
+                    &mut solution.patch_radiance[e]
+                } else {
+                    &mut solution.patch_radiance_back[e]
+                };
+                *solved = gap_face.map(sanitize);
             }
-            solution.patch_radiance_back[e] = back.map(sanitize);
         }
         for q in 0..n {
             for face in 0..2 {
@@ -174,15 +238,15 @@ impl Cavities {
     }
 }
 
-/// The covers of emitter `p` as [`Cavities::covered`] lists them, when every one of its grid
-/// points' rays straight back meets a surface that does not emit within the gap; `None`
-/// otherwise.
-fn covers_of(patches: &Patches, scene: &RayScene, p: usize) -> Option<Vec<Cover>> {
-    let (tri, n) = (&patches.corners[p], patches.normal[p]);
+/// The covers of emitter `p`'s face toward `axis` (its normal or the opposite), when every one
+/// of its grid points' rays along `axis` meets a surface that does not emit within the gap;
+/// `None` otherwise.
+fn covers_of(patches: &Patches, scene: &RayScene, p: usize, axis: DVec3) -> Option<Vec<Cover>> {
+    let tri = &patches.corners[p];
     let gap = COVERED_GAP * patches.area[p].sqrt();
     // Tilted off the normal by 0.01 rad: a ray exactly along an axis can slip past a flat box
     // of the BVH.
-    let back: DVec3 = (-n + 0.01 * (tri[1] - tri[0]).normalize()).normalize();
+    let dir: DVec3 = (axis + 0.01 * (tri[1] - tri[0]).normalize()).normalize();
     let side = COVER_POINTS_SIDE;
     let share = 1.0 / (side * side) as f64;
     let mut covers: Vec<Cover> = Vec::new();
@@ -193,11 +257,11 @@ fn covers_of(patches: &Patches, scene: &RayScene, p: usize) -> Option<Vec<Cover>
                 (j as f64 + 0.5) / side as f64,
             );
             let x = crate::geometry::sampling::point_on_triangle(tri, u1, u2);
-            let hit = scene.closest(x, back, p)?;
+            let hit = scene.closest(x, dir, p)?;
             if hit.t >= gap || patches.is_emitter(hit.patch) {
                 return None;
             }
-            let front = patches.normal[hit.patch].dot(back) < 0.0;
+            let front = patches.normal[hit.patch].dot(dir) < 0.0;
             let patch = hit.patch as u32;
             match covers
                 .iter_mut()
@@ -289,6 +353,27 @@ mod tests {
         }
         assert_eq!(solution.patch_radiance[0], [0.1; 3]);
         assert_eq!(solution.patch_radiance_back[0], [0.0; 3]);
+    }
+
+    #[test]
+    fn a_one_sided_panel_facing_the_ceiling_sends_its_light_into_the_gap_only() {
+        let mut patches = panel_under(0.001, true, false);
+        for p in [2, 3] {
+            let [a, b, c] = patches.corners[p];
+            patches.corners[p] = [a, c, b];
+            patches.normal[p] = -patches.normal[p];
+        }
+        let cavities = Cavities::find(&patches).expect("covered");
+        assert_eq!(cavities.len(), 2);
+        assert!(cavities.trapped.iter().all(|t| t.front.is_some()));
+        let opened = cavities.opened(&patches);
+        assert_eq!(opened.emission[2], [0.0; 3], "no light of it gets out");
+        let mut solution = solved();
+        cavities.fill(&mut solution, &patches);
+        let cover = 0.8 * 2.0 / (1.0 - 0.8 * 0.5);
+        assert!((solution.patch_radiance[2][0] - (2.0 + 0.5 * cover)).abs() < 1e-9);
+        let ceiling = (solution.patch_radiance[0][0] + solution.patch_radiance[1][0]) * 4.5;
+        assert!((ceiling - (8.0 * 0.1 + cover)).abs() < 1e-9);
     }
 
     #[test]

@@ -34,15 +34,16 @@ pub fn solve_warnings(
 /// above which [`covered_emitter_warning`] warns.
 pub const COVERED_POWER: f64 = 0.01;
 
-/// The warning for a solve that left two-sided emitters whose back faces a surface closer than
+/// The warning for a solve that left emitters with a face (the front, or a two-sided
+/// emitter's back) just in front of a surface, closer than
 /// [`crate::solve::cavity::COVERED_GAP`] of their size (a luminaire's panel hung just under a
-/// ceiling) in the scene, when they carry more than [`COVERED_POWER`] of the emitted power;
+/// ceiling), in the scene, when they carry more than [`COVERED_POWER`] of the emitted power;
 /// `None` otherwise, and when the solve solved their gaps on their own
 /// ([`SolveStats::covered_emitters`], [`crate::solve::cavity`]: every solve but the
-/// relighter's). Their backs light the gap, whose light is trapped there; antiradiance cancels
-/// it only approximately, so the rest of the scene comes out too bright: b90_office two-sided,
-/// whose fluorescent panels hang 0.76 mm under its ceiling, 17.6% from its path-traced
-/// reference (bias +17%) solved with the panels as given.
+/// relighter's). The light such a face sends into the gap is trapped there; antiradiance
+/// cancels it only approximately, so the rest of the scene comes out too bright: b90_office
+/// two-sided, whose fluorescent panels hang 0.76 mm under its ceiling, 17.6% from its
+/// path-traced reference (bias +17%) solved with the panels as given.
 pub fn covered_emitter_warning(patches: &Patches, stats: &SolveStats) -> Option<Warning> {
     if stats.covered_emitters > 0 {
         return None;
@@ -55,17 +56,17 @@ pub fn covered_emitter_warning(patches: &Patches, stats: &SolveStats) -> Option<
         .map(power)
         .sum();
     let share = cavities
-        .covered
+        .trapped
         .iter()
-        .map(|&(p, _)| power(p as usize))
+        .map(|t| power(t.emitter as usize))
         .sum::<f64>()
         / total;
     (share > COVERED_POWER).then(|| {
         Warning::new(
             WarningKind::CoveredEmitter,
             format!(
-                "{} ({:.0}% of the emitted power) face a surface closer than {:.0}% of their size behind them: the light their backs send into that gap is trapped there, which antiradiance cancels only approximately, so the rest of the scene can come out too bright (make such emitters one-sided: --two-sided-material for the other materials)",
-                plural(cavities.len(), "two-sided emitting triangle", "two-sided emitting triangles"),
+                "{} ({:.0}% of the emitted power) face a surface closer than {:.0}% of their size: the light they send into that gap is trapped there, which antiradiance cancels only approximately, so the rest of the scene can come out too bright (solve the scene with the solve command, which solves such gaps on their own)",
+                plural(cavities.len(), "emitting triangle", "emitting triangles"),
                 100.0 * share,
                 100.0 * crate::solve::cavity::COVERED_GAP
             ),
