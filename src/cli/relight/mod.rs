@@ -251,6 +251,20 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
     if let Some(w) = &memory_warning {
         crate::cli::driver::print_warning(w);
     }
+    // The relighter solves emitters as given, so emitters just in front of a surface are left
+    // to antiradiance (the solve command works their gaps out on their own).
+    let covered_warning = options
+        .antiradiance
+        .then(|| {
+            antiradiance::solve::warnings::covered_emitter_warning(
+                relighter.patches(),
+                &antiradiance::solve::solution::SolveStats::default(),
+            )
+        })
+        .flatten();
+    if let Some(w) = &covered_warning {
+        crate::cli::driver::print_warning(w);
+    }
 
     // The camera is resolved once, so every frame has the same view.
     let (eye, target) = render::resolve_view(relighter.patches(), &camera);
@@ -296,7 +310,7 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
     if let Some(path) = &args.report {
         let mut report = Report::new("relight", &args.scene.scene, &loaded);
         report
-            .add_warnings(memory_warning)
+            .add_warnings(memory_warning.into_iter().chain(covered_warning))
             .insert(
                 "parameters",
                 parameters_json(args, &options, &view.camera, eye, target),
