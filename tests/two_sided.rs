@@ -519,3 +519,48 @@ fn two_sided_room_facing_out_is_lit_inside() {
     );
     assert!(error < 0.05, "error {error}");
 }
+
+/// The commands on [`room_facing_out`] with its panel 1 mm under the ceiling: `solve` works
+/// the gap out on its own (no warning, `stats.covered_emitters` in the report); `relight`,
+/// which solves emitters as given, warns on one line.
+#[test]
+fn cli_solves_a_covered_emitter_apart_and_relight_warns_about_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let obj = dir.path().join("panel_room.obj");
+    antiradiance::scene::write_obj::write_obj(&room_facing_out(0.001), &obj, "panel room")
+        .expect("written");
+    let report = dir.path().join("r.json");
+    let o = run_cli(&[
+        "solve",
+        s(&obj),
+        "--two-sided",
+        "--report",
+        s(&report),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("warning"), "{}", stderr(&o));
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_eq!(json["stats"]["covered_emitters"], 32, "{}", json["stats"]);
+    let frames = dir.path().join("frames");
+    let o = run_cli(&[
+        "relight",
+        s(&obj),
+        "--two-sided",
+        "--frames",
+        "1",
+        "--out",
+        s(&frames),
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let err = stderr(&o);
+    let warnings: Vec<&str> = err.lines().filter(|l| l.starts_with("warning:")).collect();
+    assert_eq!(warnings.len(), 1, "{err}");
+    assert!(warnings[0].contains("32 emitting triangles"), "{err}");
+}
