@@ -24,9 +24,9 @@
 //! its faces inside reported with their emission. Such an object is left alone when its inside
 //! is meant to be seen: a one-sided emitting triangle faces inside, the object encloses the
 //! whole scene (a furnace), or another object's triangle lies within its bounds (a room whose
-//! ceiling lights are part of its mesh). Solved as given, a two-sided tube's faces inside filled it with
-//! light that antiradiance had to cancel everywhere outside it, and where the exposure test
-//! gave them faces the generated classroom's two-sided solve came out 9% off.
+//! ceiling lights are part of its mesh). Solved as given, a two-sided tube's faces inside
+//! filled it with light that antiradiance had to cancel everywhere outside it, and where the
+//! exposure test gave them faces the generated classroom's two-sided solve came out 9% off.
 
 use std::collections::HashMap;
 

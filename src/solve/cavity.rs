@@ -1,27 +1,30 @@
-//! Thin cavities behind two-sided emitters: a luminaire's panel hung just under a ceiling.
+//! Thin cavities in front of emitter faces: a luminaire's panel hung just under a ceiling.
 //!
-//! A two-sided emitter whose back faces a surface (its *cover*) closer than [`COVERED_GAP`] of
-//! its size sends its back's light into a gap that keeps it: the emitter's back and the part
-//! of the cover over it see almost only each other. Solved with the rest of the scene, that
-//! light, many times the room's, lights the cover's elements, and antiradiance has to cancel
-//! it for everything outside the gap, which it does only approximately: b90_office two-sided
-//! (fluorescent panels 0.76 mm under its ceiling) came out 17.6% from its path-traced
-//! reference, every surface too bright (walls +41%); a plain room with one such panel 21%.
+//! An emitter face (its front, or a two-sided emitter's back) that faces a surface (its
+//! *cover*) closer than [`COVERED_GAP`] of the emitter's size sends its light into a gap that
+//! keeps it: the face and the part of the cover over it see almost only each other. Solved
+//! with the rest of the scene, that light, many times the room's, lights the cover's elements,
+//! and antiradiance has to cancel it for everything outside the gap, which it does only
+//! approximately: b90_office two-sided (fluorescent panels 0.76 mm under its ceiling, their
+//! backs toward it) came out 17.6% from its path-traced reference, every surface too bright
+//! (walls +41%); a plain room with one such panel 21%, and 36% with the panel one-sided facing
+//! up into the ceiling (the room lit by the leak, its path tracer's nearly black).
 //!
 //! Such a gap is solved on its own instead, as two parallel plates (the gap is at most 2% of
 //! the emitter's size, so what leaves it at the edges is of that order): the cover's covered
-//! part and the emitter's back have, per channel,
+//! part and the emitter's face have, per channel,
 //!
 //! ```text
-//! B_cover = rho_c E / (1 - rho_c rho_e),    B_back = E + rho_e B_cover
+//! B_cover = rho_c E / (1 - rho_c rho_e),    B_face = E + rho_e B_cover
 //! ```
 //!
 //! with `E` the emitter's emission, `rho_e` its albedo and `rho_c` the cover's (0 where the
-//! cover turns a one-sided back to the gap: it absorbs). The rest of the scene is solved with
-//! the emitter one-sided (its back absorbs and blocks like any one-sided back). After the solve
-//! the emitter's back face gets `B_back`, and the cover's face toward the gap the area-weighted
-//! mean of `B_cover` over its covered part and its solved radiance over the rest: a path
-//! tracer's per-triangle estimate averages over the whole triangle, hidden part included.
+//! cover turns a one-sided back to the gap: it absorbs). The rest of the scene is solved
+//! without that face ([`Cavities::opened`]: a back-covered emitter one-sided, a front-covered
+//! two-sided one turned around and one-sided, a front-covered one-sided one black). After the
+//! solve the face gets `B_face`, and the cover's face toward the gap the area-weighted mean of
+//! `B_cover` over its covered part and its solved radiance over the rest: a path tracer's
+//! per-triangle estimate averages over the whole triangle, hidden part included.
 //!
 //! Only [`crate::solve::run`] does this (the `solve` command, [`crate::solve()`]); the
 //! relighter solves such emitters as given
@@ -34,16 +37,16 @@ use crate::geometry::raytrace::RayScene;
 use crate::mesh::Patches;
 use crate::solve::solution::{sanitize, Solution};
 
-/// How close a surface behind a two-sided emitter makes a cavity, as a share of the emitter's
-/// size (the square root of its area).
+/// How close a surface in front of an emitter face makes a cavity, as a share of the
+/// emitter's size (the square root of its area).
 pub const COVERED_GAP: f64 = 0.02;
 
-/// Points per emitter whose rays straight back must all meet a surface that does not emit
-/// within the gap for the emitter to count as covered (a 4 x 4 grid over the triangle); each
+/// Points per emitter face whose rays straight out of it must all meet a surface that does not
+/// emit within the gap for the face to count as covered (a 4 x 4 grid over the triangle); each
 /// point stands for an equal share of the emitter's area on the surface it meets.
 const COVER_POINTS_SIDE: usize = 4;
 
-/// A surface behind a covered emitter.
+/// A surface in front of a covered emitter face.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Cover {
     /// The covering patch.
