@@ -55,8 +55,8 @@ const BEHIND_NOTHING: f64 = 1e-12;
 /// `2 SCENE_EPS` in front of it; only what they meet behind its plane counts, not a neighbour
 /// sharing its edge met before they cross it: the caps of a thin tube, whose rays met the
 /// tube's sides at the rim, were found exposed; without them b90_office blocks at 4,093
-/// patches instead of 7,221, 31.2M links instead of 33.1M); a patch with a back-to-back twin (the same corners in reverse
-/// order) is not exposed: the twin's front covers its back;
+/// patches instead of 7,221, 31.2M links instead of 33.1M); a patch with a back-to-back twin
+/// (the same corners in reverse order) is not exposed: the twin's front covers its back;
 /// the back is exposed when at least [`EXPOSED_SHARE`] of those that meet a surface first meet
 /// the front of another (they see open space that light crosses), not when they meet backs
 /// (the inside of a closed object, or a twin) or all leave the scene (the outside of a room
@@ -217,10 +217,9 @@ fn stratified_ray(
 /// of a closed object, whose rays meet only its own backs, stays unexposed (closed objects are
 /// turned to face out before this test, `mesh::closed`; the inside of a closed tube light was
 /// once reached from caps whose backs the first step found exposed, and, filled with its own
-/// light, took the generated classroom's two-sided solve 9% off). A two-sided room whose walls face out sees
-/// only their backs from inside: the backs that see its light are found first, and the light
-/// spreads from them.
-/// Counting only backs found by the first step, none was, and the room came out black
+/// light, took the generated classroom's two-sided solve 9% off). A two-sided room whose walls
+/// face out sees only their backs from inside: the backs that see its light are found first,
+/// and the light spreads from them. Counting only backs found by the first step, none was, and the room came out black
 /// (`two_sided_room_facing_out_is_lit_inside` in `tests/two_sided.rs`); counting every
 /// two-sided patch met, whether lit or not, b90_office's two-sided solve diverged.
 fn two_sided_exposed(
