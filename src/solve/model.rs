@@ -219,9 +219,10 @@ fn stratified_ray(
 /// once reached from caps whose backs the first step found exposed, and, filled with its own
 /// light, took the generated classroom's two-sided solve 9% off). A two-sided room whose walls
 /// face out sees only their backs from inside: the backs that see its light are found first,
-/// and the light spreads from them. Counting only backs found by the first step, none was, and the room came out black
-/// (`two_sided_room_facing_out_is_lit_inside` in `tests/two_sided.rs`); counting every
-/// two-sided patch met, whether lit or not, b90_office's two-sided solve diverged.
+/// and the light spreads from them. Counting only backs found by the first step, none was,
+/// and the room came out black (`two_sided_room_facing_out_is_lit_inside` in
+/// `tests/two_sided.rs`); counting every two-sided patch met, whether lit or not, b90_office's
+/// two-sided solve diverged.
 fn two_sided_exposed(
     patches: &Patches,
     scene: &RayScene,
