@@ -9,10 +9,10 @@ use crate::solve::{budget, direct, SolverKind, SolverOptions};
 
 /// The warnings of one antiradiance solve: memory limit ([`memory_warning`]), iteration cap
 /// ([`cap_warning`]), skipped direct light ([`direct_light_warning`]), capped form-factor rows
-/// ([`capped_rows_warning`]), much negative radiance ([`negative_warning`]), radiance above
-/// the bound ([`bound_warning`]) and two-sided emitters just in front of a surface
-/// ([`covered_emitter_warning`]). A failed solve is not warned about here: it is an error
-/// ([`SolveStats::check`]).
+/// ([`capped_rows_warning`]), much negative radiance ([`negative_warning`]) and radiance above
+/// the bound ([`bound_warning`]). A failed solve is not warned about here: it is an error
+/// ([`SolveStats::check`]). (Emitters just in front of a surface are solved apart by
+/// [`crate::solve::run`]; [`covered_emitter_warning`] is for the relighter, which does not.)
 pub fn solve_warnings(
     kind: SolverKind,
     stats: &SolveStats,
@@ -26,7 +26,6 @@ pub fn solve_warnings(
         .chain(capped_rows_warning(kind.name(), stats))
         .chain(negative_warning(kind.name(), stats, options))
         .chain(bound_warning(kind.name(), stats))
-        .chain(covered_emitter_warning(patches, stats))
         .collect()
 }
 
