@@ -42,6 +42,18 @@ fn solve(scene: &Scene, kind: SolverKind) -> Solution {
     .expect("solves")
 }
 
+/// The path tracer's answer for `scene` at 1,024 samples per patch.
+fn path_traced(scene: &Scene) -> Solution {
+    solve_reference(
+        &build_patches(scene, None),
+        &ReferenceOptions {
+            spp: 1024,
+            ..ReferenceOptions::default()
+        },
+        &Progress::hidden(),
+    )
+}
+
 /// Area-weighted mean of `values` over the triangles `keep` selects.
 fn mean(scene: &Scene, values: &[[f64; 3]], keep: impl Fn(usize) -> bool) -> f64 {
     let (mut num, mut den) = (0.0, 0.0);
@@ -60,6 +72,25 @@ fn difference(scene: &Scene, a: &[[f64; 3]], b: &[[f64; 3]], keep: impl Fn(usize
         den += scene.area(t) * b[t][0].abs();
     }
     num / den
+}
+
+/// Over the triangles `keep` selects, the back faces of `solved` against those of `truth`:
+/// their area-weighted means and [`difference`].
+fn backs_against(
+    scene: &Scene,
+    solved: &Solution,
+    truth: &Solution,
+    keep: impl Fn(usize) -> bool + Copy,
+) -> (f64, f64, f64) {
+    let (a, b) = (
+        &solved.triangle_radiance_back,
+        &truth.triangle_radiance_back,
+    );
+    (
+        mean(scene, a, keep),
+        mean(scene, b, keep),
+        difference(scene, a, b, keep),
+    )
 }
 
 /// Floor triangles (not the light, not the plate).
@@ -163,15 +194,7 @@ fn two_sided_plate_matches_back_to_back_twins() {
 #[test]
 fn two_sided_plate_matches_the_path_tracer() {
     let scene = plate_scene();
-    let patches = build_patches(&scene, None);
-    let truth = solve_reference(
-        &patches,
-        &ReferenceOptions {
-            spp: 1024,
-            ..ReferenceOptions::default()
-        },
-        &Progress::hidden(),
-    );
+    let truth = path_traced(&scene);
     let h = solve(&scene, SolverKind::Hierarchical);
     let under_h = mean(&scene, &h.triangle_radiance_back, plate);
     let under_t = mean(&scene, &truth.triangle_radiance_back, plate);
@@ -447,27 +470,11 @@ fn two_sided_emitter_just_under_a_ceiling_is_solved_as_a_thin_cavity() {
     let h = solve(&scene, SolverKind::Hierarchical);
     assert_eq!(h.stats.covered_emitters, panel as u64);
     assert!(covered_emitter_warning(&patches, &h.stats).is_none());
-    let truth = solve_reference(
-        &patches,
-        &ReferenceOptions {
-            spp: 1024,
-            ..ReferenceOptions::default()
-        },
-        &Progress::hidden(),
-    );
+    let truth = path_traced(&scene);
     let room = |t: usize| scene.emission[t][0] == 0.0;
-    let inside = mean(&scene, &h.triangle_radiance_back, room);
-    let inside_truth = mean(&scene, &truth.triangle_radiance_back, room);
-    let error = difference(
-        &scene,
-        &h.triangle_radiance_back,
-        &truth.triangle_radiance_back,
-        room,
-    );
+    let (inside, inside_truth, error) = backs_against(&scene, &h, &truth, room);
     // The panel's backs: the gap's light, many times the room's.
-    let emitter = |t: usize| !room(t);
-    let back = mean(&scene, &h.triangle_radiance_back, emitter);
-    let back_truth = mean(&scene, &truth.triangle_radiance_back, emitter);
+    let (back, back_truth, _) = backs_against(&scene, &h, &truth, |t| !room(t));
     eprintln!(
         "inside {inside} vs path tracer {inside_truth}, error {error}; panel backs {back} vs {back_truth}"
     );
@@ -489,29 +496,14 @@ fn two_sided_emitter_just_under_a_ceiling_is_solved_as_a_thin_cavity() {
 fn two_sided_room_facing_out_is_lit_inside() {
     let scene = room_facing_out(0.3);
     let room = |t: usize| scene.emission[t][0] == 0.0;
-    let patches = build_patches(&scene, None);
-    let truth = solve_reference(
-        &patches,
-        &ReferenceOptions {
-            spp: 1024,
-            ..ReferenceOptions::default()
-        },
-        &Progress::hidden(),
-    );
+    let truth = path_traced(&scene);
     let h = solve(&scene, SolverKind::Hierarchical);
     assert_eq!(
         h.triangle_radiance_back.len(),
         scene.len(),
         "the room's backs have no faces"
     );
-    let inside = mean(&scene, &h.triangle_radiance_back, room);
-    let inside_truth = mean(&scene, &truth.triangle_radiance_back, room);
-    let error = difference(
-        &scene,
-        &h.triangle_radiance_back,
-        &truth.triangle_radiance_back,
-        room,
-    );
+    let (inside, inside_truth, error) = backs_against(&scene, &h, &truth, room);
     eprintln!("inside {inside} vs path tracer {inside_truth}, error {error}");
     assert!(
         (inside / inside_truth - 1.0).abs() < 0.03,

@@ -91,26 +91,14 @@ impl Patches {
                 continue;
             }
             turned += 1;
-            let [a, b, c] = out.corners[p];
-            out.corners[p] = [a, c, b];
-            out.normal[p] = -out.normal[p];
+            out.turn_around(p);
             if two_sided {
                 turned_two_sided.push(p as u32);
-                if let Some(s) = out.source.get_mut(p) {
-                    *s = self.source_back.get(p).copied().unwrap_or([0.0; 3]);
-                }
             } else {
-                out.albedo[p] = [0.0; 3];
-                out.emission[p] = [0.0; 3];
-                if let Some(s) = out.source.get_mut(p) {
-                    *s = [0.0; 3];
-                }
+                out.blacken(p);
             }
         }
-        if out.two_sided.iter().all(|&t| !t) {
-            out.two_sided = Vec::new();
-            out.source_back = Vec::new();
-        }
+        out.forget_two_sided_if_none();
         Some((
             out,
             Outward {
@@ -422,6 +410,22 @@ mod tests {
         )
     }
 
+    /// Adds a triangle facing down at height `y` within the unit cube of [`scene_with_cube`],
+    /// grey `albedo` and `emission`, two-sided when the scene's triangles are.
+    fn push_triangle_inside(scene: &mut Scene, y: f64, albedo: f64, emission: f64) {
+        let base = scene.positions.len() as u32;
+        for p in [[0.2, y, 0.2], [0.8, y, 0.2], [0.5, y, 0.8]] {
+            scene.positions.push(DVec3::from_array(p));
+        }
+        scene.triangles.push([base, base + 2, base + 1]);
+        scene.albedo.push([albedo; 3]);
+        scene.emission.push([emission; 3]);
+        scene.material.push(None);
+        if !scene.two_sided.is_empty() {
+            scene.two_sided.push(true);
+        }
+    }
+
     #[test]
     fn a_consistently_outward_cube_turns_nothing() {
         assert_eq!(turned(&scene_with_cube()), (vec![], 1));
@@ -501,15 +505,7 @@ mod tests {
         assert_eq!(turned(&emitting_cube(&[4], true, false)), (vec![], 0));
         // One with something inside it is a room whose lights are part of its mesh.
         let mut room = emitting_cube(&[4], true, true);
-        let base = room.positions.len() as u32;
-        for p in [[0.2, 0.1, 0.2], [0.8, 0.1, 0.2], [0.5, 0.1, 0.8]] {
-            room.positions.push(DVec3::from_array(p));
-        }
-        room.triangles.push([base, base + 2, base + 1]);
-        room.albedo.push([0.5; 3]);
-        room.emission.push([0.0; 3]);
-        room.material.push(None);
-        room.two_sided.push(true);
+        push_triangle_inside(&mut room, 0.1, 0.5, 0.0);
         assert_eq!(turned(&room), (vec![], 0));
     }
 
@@ -522,14 +518,7 @@ mod tests {
         // An emitter inside the cube's bounds: the inside may be lit.
         let mut lit = scene_with_cube();
         lit.triangles[1].swap(1, 2);
-        let base = lit.positions.len() as u32;
-        for p in [[0.2, 0.5, 0.2], [0.8, 0.5, 0.2], [0.5, 0.5, 0.8]] {
-            lit.positions.push(DVec3::from_array(p));
-        }
-        lit.triangles.push([base, base + 2, base + 1]);
-        lit.albedo.push([0.0; 3]);
-        lit.emission.push([1.0; 3]);
-        lit.material.push(None);
+        push_triangle_inside(&mut lit, 0.5, 0.0, 1.0);
         assert_eq!(turned(&lit), (vec![], 0));
     }
 }

@@ -112,6 +112,36 @@ impl Patches {
         (0..self.len()).any(|p| self.is_two_sided(p))
     }
 
+    /// Turns patch `p` around: corners reversed, normal negated, and its back face's analytic
+    /// source (`source_back`, 0 when none) made its front's. Its albedo and emission stay.
+    pub fn turn_around(&mut self, p: usize) {
+        let [a, b, c] = self.corners[p];
+        self.corners[p] = [a, c, b];
+        self.normal[p] = -self.normal[p];
+        let back = self.source_back.get(p).copied().unwrap_or([0.0; 3]);
+        if let Some(s) = self.source.get_mut(p) {
+            *s = back;
+        }
+    }
+
+    /// Makes patch `p` black and dark: albedo, emission and analytic source 0.
+    pub fn blacken(&mut self, p: usize) {
+        self.albedo[p] = [0.0; 3];
+        self.emission[p] = [0.0; 3];
+        if let Some(s) = self.source.get_mut(p) {
+            *s = [0.0; 3];
+        }
+    }
+
+    /// Empties `two_sided` and `source_back` when no patch is two-sided any more (after some
+    /// were made one-sided).
+    pub fn forget_two_sided_if_none(&mut self) {
+        if self.two_sided.iter().all(|&t| !t) {
+            self.two_sided = Vec::new();
+            self.source_back = Vec::new();
+        }
+    }
+
     /// These patches with every two-sided patch's back face appended as a one-sided patch of
     /// its own (corners reversed, after the last patch; the pair covers each other's backs),
     /// and per patch the index of its back face's patch. Input triangles keep their patches

@@ -66,15 +66,13 @@ pub struct Trapped {
     pub front: Option<Vec<Cover>>,
     /// The covers of its back, when it is two-sided and its back is covered.
     pub back: Option<Vec<Cover>>,
-    /// It is two-sided.
-    pub two_sided: bool,
 }
 
 impl Trapped {
-    /// Its front is covered and it is two-sided with a free back: it is solved turned around,
-    /// one-sided (its back becomes the solved front).
-    fn turned(&self) -> bool {
-        self.front.is_some() && self.back.is_none() && self.two_sided
+    /// Its front is covered and it is two-sided (in `patches`, those it was found in) with a
+    /// free back: it is solved turned around, one-sided (its back becomes the solved front).
+    fn turned(&self, patches: &Patches) -> bool {
+        self.front.is_some() && self.back.is_none() && patches.is_two_sided(self.emitter as usize)
     }
 }
 
@@ -111,7 +109,6 @@ impl Cavities {
                     emitter: p as u32,
                     front,
                     back,
-                    two_sided: patches.is_two_sided(p),
                 })
             })
             .collect();
@@ -138,25 +135,13 @@ impl Cavities {
             if let Some(two) = out.two_sided.get_mut(p) {
                 *two = false;
             }
-            if t.turned() {
-                let [a, b, c] = out.corners[p];
-                out.corners[p] = [a, c, b];
-                out.normal[p] = -out.normal[p];
-                if let Some(s) = out.source.get_mut(p) {
-                    *s = patches.source_back.get(p).copied().unwrap_or([0.0; 3]);
-                }
+            if t.turned(patches) {
+                out.turn_around(p);
             } else if t.front.is_some() {
-                out.emission[p] = [0.0; 3];
-                out.albedo[p] = [0.0; 3];
-                if let Some(s) = out.source.get_mut(p) {
-                    *s = [0.0; 3];
-                }
+                out.blacken(p);
             }
         }
-        if out.two_sided.iter().all(|&t| !t) {
-            out.two_sided = Vec::new();
-            out.source_back = Vec::new();
-        }
+        out.forget_two_sided_if_none();
         out
     }
 
@@ -177,7 +162,7 @@ impl Cavities {
             let e = t.emitter as usize;
             let emission = patches.emission[e].map(|x| x * patches.emission_scale);
             let rho_e = patches.albedo[e];
-            if t.turned() {
+            if t.turned(patches) {
                 solution.patch_radiance_back[e] = solution.patch_radiance[e];
             }
             for (covers, face) in [(&t.front, 0), (&t.back, 1)] {
@@ -362,9 +347,7 @@ mod tests {
     fn a_one_sided_panel_facing_the_ceiling_sends_its_light_into_the_gap_only() {
         let mut patches = panel_under(0.001, true, false);
         for p in [2, 3] {
-            let [a, b, c] = patches.corners[p];
-            patches.corners[p] = [a, c, b];
-            patches.normal[p] = -patches.normal[p];
+            patches.turn_around(p);
         }
         let cavities = Cavities::find(&patches).expect("covered");
         assert_eq!(cavities.len(), 2);

@@ -17,7 +17,7 @@ use std::sync::atomic::{AtomicU8, Ordering};
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::geometry::raytrace::RayScene;
+use crate::geometry::raytrace::{Hit, RayScene};
 use crate::geometry::sampling::{cosine_direction, point_on_triangle, Rng};
 use crate::hierarchy::ClusterTree;
 use crate::mesh::Patches;
@@ -230,9 +230,7 @@ fn two_sided_exposed(
     lit_front: &(impl Fn(usize, DVec3) -> bool + Sync),
     exposed: &mut [bool],
 ) {
-    let active = patches.active_count().max(1);
-    let rays = (BACK_RAY_BUDGET / active).clamp(BACK_RAYS_MIN, BACK_RAYS_MAX);
-    let side = (rays as f64).sqrt().ceil() as usize;
+    let back_rays = BackRays::of(patches);
     let emits_toward =
         |hit: usize, dir: DVec3| patches.is_emitter(hit) && patches.normal[hit].dot(dir) < 0.0;
     // Per open candidate: whether a ray met an emitting face, and the patches its rays met
@@ -244,17 +242,9 @@ fn two_sided_exposed(
     let met: Vec<Met> = open
         .par_iter()
         .map(|&p| {
-            let (tri, n) = (&patches.corners[p], patches.normal[p]);
-            let mut rng = Rng::new(0x6261_636b, p as u64);
-            let mut hits = Vec::with_capacity(rays);
-            for k in 0..rays {
-                let (org, dir) = stratified_ray(tri, n, -n, (k, side), &mut rng);
-                // A ray started in front of the patch can meet a neighbour sharing its edge
-                // before it crosses the patch's plane (the faces of a thin tube): only what
-                // lies behind the plane counts.
-                let behind =
-                    |x: DVec3| n.dot(x - tri[0]) < -BEHIND_HIT * crate::geometry::SCENE_EPS;
-                if let Some(hit) = scene.closest(org, dir, p).filter(|hit| behind(hit.point)) {
+            let mut hits = Vec::with_capacity(back_rays.rays);
+            for (dir, hit) in back_rays.traced(patches, scene, p) {
+                if let Some(hit) = hit {
                     if emits_toward(hit.patch, dir) {
                         return (true, Vec::new());
                     }
@@ -285,6 +275,50 @@ fn two_sided_exposed(
     }
 }
 
+/// The back rays of [`exposed_backs`]: per patch, `rays` cosine-distributed rays into its back
+/// from stratified points (see `stratified_ray`), the same for every step of the test.
+struct BackRays {
+    /// Rays per patch: [`BACK_RAY_BUDGET`] over the active patches, between [`BACK_RAYS_MIN`]
+    /// and [`BACK_RAYS_MAX`].
+    rays: usize,
+    /// Side of the grid the ray origins are stratified on.
+    side: usize,
+}
+
+impl BackRays {
+    fn of(patches: &Patches) -> BackRays {
+        let active = patches.active_count().max(1);
+        let rays = (BACK_RAY_BUDGET / active).clamp(BACK_RAYS_MIN, BACK_RAYS_MAX);
+        BackRays {
+            rays,
+            side: (rays as f64).sqrt().ceil() as usize,
+        }
+    }
+
+    /// Patch `p`'s rays in order, each as its direction and what it meets behind the patch's
+    /// plane (by [`BEHIND_HIT`]): a ray started in front of the patch can meet a neighbour
+    /// sharing its edge before it crosses the plane (the caps and sides of a thin tube), which
+    /// does not count.
+    fn traced<'s>(
+        &self,
+        patches: &'s Patches,
+        scene: &'s RayScene,
+        p: usize,
+    ) -> impl Iterator<Item = (DVec3, Option<Hit>)> + 's {
+        let (tri, n) = (patches.corners[p], patches.normal[p]);
+        let mut rng = Rng::new(0x6261_636b, p as u64);
+        let side = self.side;
+        (0..self.rays).map(move |k| {
+            let (org, dir) = stratified_ray(&tri, n, -n, (k, side), &mut rng);
+            let behind = |x: DVec3| n.dot(x - tri[0]) < -BEHIND_HIT * crate::geometry::SCENE_EPS;
+            (
+                dir,
+                scene.closest(org, dir, p).filter(|hit| behind(hit.point)),
+            )
+        })
+    }
+}
+
 /// [`exposed_backs`]'s ray test for the patches marked in `candidates` (false for the others),
 /// `lit(hit, dir)` telling whether a back ray in direction `dir` met a lit face of patch `hit`.
 fn exposed_where(
@@ -293,23 +327,17 @@ fn exposed_where(
     candidates: &[bool],
     lit: impl Fn(usize, DVec3) -> bool + Sync,
 ) -> Vec<bool> {
-    let active = patches.active_count().max(1);
-    let rays = (BACK_RAY_BUDGET / active).clamp(BACK_RAYS_MIN, BACK_RAYS_MAX);
-    let side = (rays as f64).sqrt().ceil() as usize;
+    let back_rays = BackRays::of(patches);
+    let rays = back_rays.rays;
     (0..patches.len())
         .into_par_iter()
         .map(|p| {
             if !candidates[p] {
                 return false;
             }
-            let (tri, n) = (&patches.corners[p], patches.normal[p]);
-            let mut rng = Rng::new(0x6261_636b, p as u64);
             let (mut fronts, mut hits) = (0usize, 0usize);
-            for k in 0..rays {
-                let (org, dir) = stratified_ray(tri, n, -n, (k, side), &mut rng);
-                let behind =
-                    |x: DVec3| n.dot(x - tri[0]) < -BEHIND_HIT * crate::geometry::SCENE_EPS;
-                if let Some(hit) = scene.closest(org, dir, p).filter(|hit| behind(hit.point)) {
+            for (k, (dir, hit)) in back_rays.traced(patches, scene, p).enumerate() {
+                if let Some(hit) = hit {
                     hits += 1;
                     if lit(hit.patch, dir) {
                         fronts += 1;
