@@ -153,6 +153,24 @@ fn scaling_and_translation_change_nothing() {
 }
 
 #[test]
+fn scaled_copies_of_the_occluder_scene_solve_identically() {
+    // Unit-frame coordinates are rounded to a grid far coarser than the map's own rounding, so
+    // a scaled copy is the same model: at scale 1e3 three pairs once became exact links
+    // instead of cluster links, and the results moved by 0.5%.
+    let base = generated::occluder_scene();
+    let options = SolverOptions::default();
+    let reference = solve_hierarchical(&build_patches(&base, None), &options, &hidden()).unwrap();
+    for scale in [1e3, 1e-3, 1e4] {
+        let scene = base.transformed(scale, DVec3::ZERO);
+        let solution =
+            solve_hierarchical(&build_patches(&scene, None), &options, &hidden()).unwrap();
+        assert_eq!(solution.stats.links, reference.stats.links, "scale {scale}");
+        let err = error(&base, &solution, &reference);
+        assert!(err < 1e-9, "scale {scale}: {err}");
+    }
+}
+
+#[test]
 fn emission_extremes_stay_finite() {
     for emission in [1e-30, 1e30] {
         let scene = generated::furnace_box(emission, 0.5);

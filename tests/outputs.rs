@@ -314,7 +314,9 @@ fn ply_vertex_colour_is_tone_mapped_area_weighted_mean() {
         let vert = ply
             .vertices
             .iter()
-            .find(|q| (q[0] - x).abs() < 1e-12 && (q[1] - y).abs() < 1e-12)
+            // World coordinates come back through the unit frame's grid (`UNIT_FRAME_GRID`
+            // of the scene's diameter).
+            .find(|q| (q[0] - x).abs() < 1e-9 && (q[1] - y).abs() < 1e-9)
             .unwrap();
         [vert[3] as u8, vert[4] as u8, vert[5] as u8]
     };

@@ -15,6 +15,10 @@ use crate::error::{Error, Result};
 use crate::geometry::{self, Tri};
 use crate::scene::Scene;
 
+/// Spacing of the grid unit-frame coordinates are rounded to (2^-36, about 1.5e-11 of the
+/// scene's diameter, far below [`crate::geometry::SCENE_EPS`]).
+pub const UNIT_FRAME_GRID: f64 = 1.0 / (1u64 << 36) as f64;
+
 /// The similarity that maps world coordinates to the solver's unit frame.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct UnitFrame {
@@ -25,9 +29,13 @@ pub struct UnitFrame {
 }
 
 impl UnitFrame {
-    /// Unit-frame position of a world-space point.
+    /// Unit-frame position of a world-space point, on a grid of [`UNIT_FRAME_GRID`]: the same
+    /// scene scaled or translated then lands on the same coordinates (the rounding of the map
+    /// itself, about 1e-16, stays within one grid step, so the model's threshold decisions do
+    /// not flip between copies of a scene).
     pub fn unit_from_world(&self, p: DVec3) -> DVec3 {
-        (p - self.center) * self.scale
+        let unit = (p - self.center) * self.scale;
+        (unit / UNIT_FRAME_GRID).round() * UNIT_FRAME_GRID
     }
 
     /// World-space position of a unit-frame point.

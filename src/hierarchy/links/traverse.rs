@@ -35,6 +35,13 @@ pub fn sender_spread(node: &crate::hierarchy::Node) -> f64 {
         .min(node.radius * node.radius)
 }
 
+/// The spread of a flat node in the kernels of [`super::NodePoint::kernel_toward`]: twice its
+/// mean squared distance from its centroid, `4 sigma^2` for an in-plane variance `sigma^2` per
+/// axis (a disk of radius `a`: `a^2`; a right triangle with legs `L`: `2 L^2 / 9`).
+pub fn flat_spread(node: &crate::hierarchy::Node) -> f64 {
+    2.0 * node.mean_square
+}
+
 /// Upper bound of the solid angle node `seen` subtends at any point of node `from`'s bounding
 /// sphere: its bounding sphere's, and for a leaf triangle also `pi * area / gap^2`, `gap` the
 /// distance between the two spheres (> 0).
@@ -430,7 +437,14 @@ pub(super) fn node_points(tree: &ClusterTree) -> Vec<NodePoint> {
         .par_iter()
         .map(|n| NodePoint {
             centroid: n.centroid.as_vec3().to_array(),
-            spread: sender_spread(n) as f32,
+            spread: if n.plane.is_some() {
+                flat_spread(n)
+            } else {
+                sender_spread(n)
+            } as f32,
+            normal: n
+                .plane
+                .map_or([0.0; 3], |(normal, _)| normal.as_vec3().to_array()),
         })
         .collect()
 }

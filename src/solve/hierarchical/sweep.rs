@@ -58,6 +58,13 @@ pub(super) struct SweepContext<'a> {
 }
 
 impl SweepContext<'_> {
+    /// Element `e`'s spread as a receiver ([`crate::hierarchy::links::flat_spread`] of its
+    /// triangle).
+    #[inline]
+    pub(super) fn elem_spread(&self, e: usize) -> f64 {
+        crate::hierarchy::links::flat_spread(&self.tree.nodes[self.tree.elements[e] as usize])
+    }
+
     /// Calls `f` with the index of every cluster link into element `e` or one of its ancestors
     /// that is gathered per element (element first, then up the tree; the near links of a node
     /// in stored order, [`Fields::near_end`]) and the pair's factors.
@@ -75,19 +82,25 @@ impl SweepContext<'_> {
         while node != NONE {
             let range = self.fields.near_links(links, node);
             for (i, l) in range.clone().zip(&links.cluster[range]) {
-                f(i, l, self.pair_factor(l, n_e, x_e, back, two));
+                f(
+                    i,
+                    l,
+                    self.pair_factor(l, n_e, x_e, back, two, self.elem_spread(e)),
+                );
             }
             node = self.tree.nodes[node as usize].parent;
         }
     }
 
-    /// What a cluster link gives an element with normal `n_e` at `x_e`: irradiance
-    /// `max(0, cos) / (pi (d^2 + spread))` per unit of the link's intensity, with the element's
-    /// own direction and distance from the sender, and antiradiance `1 / ((d^2 + spread)
-    /// Omega_bin)` in the link's bin where the light arrives at a side that creates it (the
-    /// front, and the back too when `back`). For a two-sided element (`two`), light arriving
-    /// at its back gives a negative irradiance factor: `-|cos| / (pi (d^2 + spread))`, the
-    /// irradiance of its back face.
+    /// What a cluster link gives an element with normal `n_e` at `x_e` and spread `s_e`
+    /// ([`Self::elem_spread`]): irradiance `(cos g - n_r . tilt g^2) / pi` per unit of the
+    /// link's intensity, `g = 1 / (d^2 + s)` with the sender's and the element's spreads in `s`
+    /// ([`crate::hierarchy::links::NodePoint::kernel_toward`], `receiver_spread`), with the
+    /// element's own direction and distance from the sender, and antiradiance `1 / ((d^2 +
+    /// s_anti) Omega_bin)` in the link's bin where the light arrives at a side that creates it
+    /// (the front, and the back too when `back`). For a two-sided element (`two`), light
+    /// arriving at its back gives a negative irradiance factor, the irradiance of its back
+    /// face (normal `n_r = -n_e`).
     #[inline]
     pub(super) fn pair_factor(
         &self,
@@ -96,6 +109,7 @@ impl SweepContext<'_> {
         x_e: DVec3,
         back: bool,
         two: bool,
+        s_e: f64,
     ) -> PairFactor {
         let sender = &self.points[l.sender as usize];
         let v = x_e - sender.centroid();
@@ -104,14 +118,22 @@ impl SweepContext<'_> {
             return PairFactor::default();
         }
         let cos = -n_e.dot(v) / d2.sqrt();
-        let g = 1.0 / (d2 + sender.spread as f64);
+        let kernel = sender.kernel_toward(v, d2);
+        // The receiving element's own extent, by the same expansion as the sender's
+        // (`NodePoint::kernel_toward`) with the roles swapped.
+        let receiver = super::fields::receiver_spread(s_e, n_e, v, d2);
+        let g = 1.0 / (d2 + (kernel.irradiance + receiver).max(-0.5 * d2));
         let irradiance = if cos > 0.0 || two {
-            cos * g * std::f64::consts::FRAC_1_PI
+            // The face that receives: the front (normal n_e) or a two-sided element's back
+            // (normal -n_e, its irradiance negative).
+            let n_r = if cos > 0.0 { n_e } else { -n_e };
+            let h = cos.abs() * g - n_r.dot(kernel.tilt) * g * g;
+            h.max(0.0).copysign(cos) * std::f64::consts::FRAC_1_PI
         } else {
             0.0
         };
         let anti = if self.use_anti && (cos > 0.0 || back) {
-            g / self.bins.solid_angle[l.bin as usize]
+            1.0 / ((d2 + kernel.anti) * self.bins.solid_angle[l.bin as usize])
         } else {
             0.0
         };
