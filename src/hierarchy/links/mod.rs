@@ -141,6 +141,9 @@ pub struct NodePoint {
     pub centroid: [f32; 3],
     /// The node's spread: [`flat_spread`] for a flat node, else [`sender_spread`].
     pub spread: f32,
+    /// The node's [`sender_spread`]: the disk kernel's, which a flat node's kernels blend into
+    /// near it ([`expansion_weight`]).
+    pub disk_spread: f32,
     /// The plane's unit normal of a flat node (either orientation); zero for a curved one.
     pub normal: [f32; 3],
 }
@@ -161,7 +164,7 @@ pub struct SenderKernel {
 
 impl NodePoint {
     /// The sender's kernels toward a receiving point at `v` from its centroid (`d2 = |v|^2 >
-    /// 0`), in the units of `d2`.
+    /// 0`, `inv_d = 1 / |v|`), in the units of `d2`.
     ///
     /// A flat sender of spread `S` (twice its mean squared distance from its centroid: a disk
     /// of radius `a` has `S = a^2`; see [`flat_spread`]) whose normal makes angle `theta` with
@@ -181,7 +184,7 @@ impl NodePoint {
     /// the disk kernel alone was low by about as much as a point receiver is high, which is
     /// why it kept a closed box's row sums near 1.
     #[inline]
-    pub fn kernel_toward(&self, v: glam::DVec3, d2: f64) -> SenderKernel {
+    pub fn kernel_toward(&self, v: glam::DVec3, d2: f64, inv_d: f64) -> SenderKernel {
         let spread = self.spread as f64;
         let n = glam::Vec3::from_array(self.normal).as_dvec3();
         if n == glam::DVec3::ZERO {
@@ -191,13 +194,20 @@ impl NodePoint {
                 tilt: glam::DVec3::ZERO,
             };
         }
-        let cos = n.dot(v) / d2.sqrt();
+        let cos = n.dot(v) * inv_d;
         let sin2 = 1.0 - cos * cos;
         let floor = -0.5 * d2;
         // The expansion holds for a receiver well outside the sender's extent; nearer (a faint
         // pair's link between overlapping nodes) it blends into the disk kernel.
         let t = expansion_weight(d2, spread);
-        let blend = |expanded: f64| spread + t * (expanded.max(floor) - spread);
+        let disk = self.disk_spread as f64;
+        let blend = |expanded: f64| {
+            if t == 1.0 {
+                expanded.max(floor)
+            } else {
+                disk + t * (expanded.max(floor) - disk)
+            }
+        };
         SenderKernel {
             irradiance: blend(spread * (2.0 - 3.0 * sin2)),
             anti: blend(spread * (0.75 - 1.875 * sin2)),
@@ -224,7 +234,7 @@ impl NodePoint {
 /// would take up to twice the point kernel from it.
 #[inline]
 pub fn expansion_weight(d2: f64, spread: f64) -> f64 {
-    if !(spread > 0.0) {
+    if !(spread > 0.0) || d2 >= 8.0 * spread {
         return 1.0;
     }
     ((d2 / spread - 4.0) / 4.0).clamp(0.0, 1.0)
@@ -597,7 +607,7 @@ mod kernel_tests {
     /// The solver's value for the same pair: `cos_r / (d^2 + s) - n_r . tilt / (d^2 + s)^2`.
     fn kernel_value(x: DVec3, n_r: DVec3, disk: &NodePoint) -> f64 {
         let d2 = x.length_squared();
-        let k = disk.kernel_toward(x, d2);
+        let k = disk.kernel_toward(x, d2, 1.0 / d2.sqrt());
         let g = 1.0 / (d2 + k.irradiance);
         let cos_r = -n_r.dot(x) / d2.sqrt();
         cos_r * g - n_r.dot(k.tilt) * g * g
@@ -609,6 +619,7 @@ mod kernel_tests {
         let disk = NodePoint {
             centroid: [0.0; 3],
             spread: 1.0,
+            disk_spread: 1.0,
             normal: [0.0, 0.0, 1.0],
         };
         for degrees in [0.0f64, 40.0, 70.0] {
@@ -644,11 +655,12 @@ mod kernel_tests {
         let disk = NodePoint {
             centroid: [0.0; 3],
             spread: 1.0,
+            disk_spread: 1.0,
             normal: [0.0, 0.0, 1.0],
         };
         // Grazing and within twice its radius: no negative spread, no tilt.
         let x = DVec3::new(1.5, 0.0, 0.1);
-        let k = disk.kernel_toward(x, x.length_squared());
+        let k = disk.kernel_toward(x, x.length_squared(), 1.0 / x.length());
         assert_eq!((k.irradiance, k.anti, k.tilt), (1.0, 1.0, DVec3::ZERO));
     }
 }

@@ -442,6 +442,7 @@ pub(super) fn node_points(tree: &ClusterTree) -> Vec<NodePoint> {
             } else {
                 sender_spread(n)
             } as f32,
+            disk_spread: sender_spread(n) as f32,
             normal: n
                 .plane
                 .map_or([0.0; 3], |(normal, _)| normal.as_vec3().to_array()),

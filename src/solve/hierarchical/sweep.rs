@@ -78,15 +78,12 @@ impl SweepContext<'_> {
         let (n_e, x_e) = (self.elem_normal[e], self.elem_center[e]);
         let back = self.two_sided || self.elem_back[e];
         let two = self.elem_two.get(e).copied().unwrap_or(false);
+        let s_e = self.elem_spread(e);
         let mut node = self.tree.elements[e];
         while node != NONE {
             let range = self.fields.near_links(links, node);
             for (i, l) in range.clone().zip(&links.cluster[range]) {
-                f(
-                    i,
-                    l,
-                    self.pair_factor(l, n_e, x_e, back, two, self.elem_spread(e)),
-                );
+                f(i, l, self.pair_factor(l, n_e, x_e, back, two, s_e));
             }
             node = self.tree.nodes[node as usize].parent;
         }
@@ -117,12 +114,18 @@ impl SweepContext<'_> {
         if !(d2 > 0.0) {
             return PairFactor::default();
         }
-        let cos = -n_e.dot(v) / d2.sqrt();
-        let kernel = sender.kernel_toward(v, d2);
+        let inv_d = 1.0 / d2.sqrt();
+        let cos = -n_e.dot(v) * inv_d;
+        let kernel = sender.kernel_toward(v, d2, inv_d);
         // The receiving element's own extent, by the same expansion as the sender's
         // (`NodePoint::kernel_toward`) with the roles swapped.
-        let receiver = super::fields::receiver_spread(s_e, n_e, v, d2);
-        let g = 1.0 / (d2 + (kernel.irradiance + receiver).max(-0.5 * d2));
+        let receiver = super::fields::receiver_spread(s_e, cos, d2);
+        let a = d2 + (kernel.irradiance + receiver).max(-0.5 * d2);
+        let anti_wanted = self.use_anti && (cos > 0.0 || back);
+        // One division for both kernels: 1 / (a b) times b, and times a.
+        let b = (d2 + kernel.anti) * self.bins.solid_angle[l.bin as usize];
+        let r = 1.0 / if anti_wanted { a * b } else { a };
+        let g = if anti_wanted { r * b } else { r };
         let irradiance = if cos > 0.0 || two {
             // The face that receives: the front (normal n_e) or a two-sided element's back
             // (normal -n_e, its irradiance negative).
@@ -132,11 +135,7 @@ impl SweepContext<'_> {
         } else {
             0.0
         };
-        let anti = if self.use_anti && (cos > 0.0 || back) {
-            1.0 / ((d2 + kernel.anti) * self.bins.solid_angle[l.bin as usize])
-        } else {
-            0.0
-        };
+        let anti = if anti_wanted { r * a } else { 0.0 };
         PairFactor {
             irradiance: irradiance as f32,
             anti: anti as f32,

@@ -122,10 +122,14 @@ impl SweepContext<'_> {
             if !(r2 > 0.0) {
                 continue;
             }
-            let kernel = sender.kernel_toward(v, r2);
-            let spread = (kernel.irradiance
-                + receiver_spread(recv_spread as f64, recv_normal, v, r2))
-            .max(-0.5 * r2);
+            let inv_r = 1.0 / r2.sqrt();
+            let kernel = sender.kernel_toward(v, r2, inv_r);
+            let receiver = if recv_normal == DVec3::ZERO {
+                0.0
+            } else {
+                receiver_spread(recv_spread as f64, recv_normal.dot(v) * inv_r, r2)
+            };
+            let spread = (kernel.irradiance + receiver).max(-0.5 * r2);
             let (r, big_d) = (r2.sqrt(), r2 + spread);
             let big_d_ar = r2 + kernel.anti;
             let i = intensity[j].map(f64::from);
@@ -262,24 +266,17 @@ impl SweepContext<'_> {
     }
 }
 
-/// The receiving elements' own extent in the irradiance kernel's spread, toward a sender at
-/// `-v` (`r2 = |v|^2 > 0`): `s_e (2 - 3 sin^2 theta_e)`, `theta_e` between the elements' normal
-/// `n_e` and `v`, for elements of spread `s_e` ([`crate::hierarchy::links::flat_spread`]); 0
-/// when `n_e` is zero (elements of several orientations). The receiver's half of the
-/// second-order expansion whose sender half is
-/// [`crate::hierarchy::links::NodePoint::kernel_toward`] (its term in the sender's normal is
-/// left out; it raised the closed-box furnace at albedo 0.8 from 10.05 to 10.08).
-pub(in crate::solve::hierarchical) fn receiver_spread(
-    s_e: f64,
-    n_e: DVec3,
-    v: DVec3,
-    r2: f64,
-) -> f64 {
-    if n_e == DVec3::ZERO {
-        return 0.0;
-    }
-    let c = n_e.dot(v);
-    crate::hierarchy::links::expansion_weight(r2, s_e) * s_e * (2.0 - 3.0 * (1.0 - c * c / r2))
+/// The receiving elements' own extent in the irradiance kernel's spread, at squared distance
+/// `r2` from a sender: `s_e (2 - 3 sin^2 theta_e)` for elements of spread `s_e`
+/// ([`crate::hierarchy::links::flat_spread`]) whose normal makes angle `theta_e` with the
+/// direction to the sender (`cos_e` its cosine, either sign), blended into 0 near the sender
+/// ([`crate::hierarchy::links::expansion_weight`]). The receiver's half of the second-order
+/// expansion whose sender half is [`crate::hierarchy::links::NodePoint::kernel_toward`] (its
+/// term in the sender's normal is left out; it raised the closed-box furnace at albedo 0.8 from
+/// 10.05 to 10.08).
+pub(in crate::solve::hierarchical) fn receiver_spread(s_e: f64, cos_e: f64, r2: f64) -> f64 {
+    let w = crate::hierarchy::links::expansion_weight(r2, s_e);
+    (w * s_e * (3.0 * cos_e * cos_e - 1.0)).max(-0.5 * r2)
 }
 
 /// The weights of an irradiance group's terms ([`SweepContext::sum_fields`]) for an element
