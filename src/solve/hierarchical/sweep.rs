@@ -58,13 +58,6 @@ pub(super) struct SweepContext<'a> {
 }
 
 impl SweepContext<'_> {
-    /// Element `e`'s spread as a receiver ([`crate::hierarchy::links::flat_spread`] of its
-    /// triangle).
-    #[inline]
-    pub(super) fn elem_spread(&self, e: usize) -> f64 {
-        crate::hierarchy::links::flat_spread(&self.tree.nodes[self.tree.elements[e] as usize])
-    }
-
     /// Calls `f` with the index of every cluster link into element `e` or one of its ancestors
     /// that is gathered per element (element first, then up the tree; the near links of a node
     /// in stored order, [`Fields::near_end`]) and the pair's factors.
@@ -78,7 +71,7 @@ impl SweepContext<'_> {
         let (n_e, x_e) = (self.elem_normal[e], self.elem_center[e]);
         let back = self.two_sided || self.elem_back[e];
         let two = self.elem_two.get(e).copied().unwrap_or(false);
-        let s_e = self.elem_spread(e);
+        let s_e = crate::hierarchy::links::element_spread(self.tree, e);
         let mut node = self.tree.elements[e];
         while node != NONE {
             let range = self.fields.near_links(links, node);
@@ -90,9 +83,10 @@ impl SweepContext<'_> {
     }
 
     /// What a cluster link gives an element with normal `n_e` at `x_e` and spread `s_e`
-    /// ([`Self::elem_spread`]): irradiance `(cos g - n_r . tilt g^2) / pi` per unit of the
-    /// link's intensity, `g = 1 / (d^2 + s)` with the sender's and the element's spreads in `s`
-    /// ([`crate::hierarchy::links::NodePoint::kernel_toward`], `receiver_spread`), with the
+    /// ([`crate::hierarchy::links::element_spread`]): irradiance `(cos g - n_r . tilt g^2) / pi`
+    /// per unit of the link's intensity, `g = 1 / (d^2 + s)` with the sender's and the
+    /// element's spreads in `s` ([`crate::hierarchy::links::NodePoint::kernel_toward`],
+    /// [`crate::hierarchy::links::receiver_spread`]), with the
     /// element's own direction and distance from the sender, and antiradiance `1 / ((d^2 +
     /// s_anti) Omega_bin)` in the link's bin where the light arrives at a side that creates it
     /// (the front, and the back too when `back`). For a two-sided element (`two`), light
@@ -119,13 +113,8 @@ impl SweepContext<'_> {
         let kernel = sender.kernel_toward(v, d2, inv_d);
         // The receiving element's own extent, by the same expansion as the sender's
         // (`NodePoint::kernel_toward`) with the roles swapped.
-        let receiver = super::fields::receiver_spread(s_e, cos, d2);
-        let a = d2 + (kernel.irradiance + receiver).max(-0.5 * d2);
-        let anti_wanted = self.use_anti && (cos > 0.0 || back);
-        // One division for both kernels: 1 / (a b) times b, and times a.
-        let b = (d2 + kernel.anti) * self.bins.solid_angle[l.bin as usize];
-        let r = 1.0 / if anti_wanted { a * b } else { a };
-        let g = if anti_wanted { r * b } else { r };
+        let receiver = crate::hierarchy::links::receiver_spread(s_e, cos, d2);
+        let g = 1.0 / (d2 + kernel.irradiance + receiver);
         let irradiance = if cos > 0.0 || two {
             // The face that receives: the front (normal n_e) or a two-sided element's back
             // (normal -n_e, its irradiance negative).
@@ -135,7 +124,11 @@ impl SweepContext<'_> {
         } else {
             0.0
         };
-        let anti = if anti_wanted { r * a } else { 0.0 };
+        let anti = if self.use_anti && (cos > 0.0 || back) {
+            1.0 / ((d2 + kernel.anti) * self.bins.solid_angle[l.bin as usize])
+        } else {
+            0.0
+        };
         PairFactor {
             irradiance: irradiance as f32,
             anti: anti as f32,

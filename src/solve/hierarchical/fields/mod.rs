@@ -36,7 +36,7 @@ mod slabs;
 mod sums;
 
 use slabs::*;
-pub(super) use sums::{receiver_spread, FieldSums};
+pub(super) use sums::FieldSums;
 use sums::{ANTI_TERMS, IRR_TERMS};
 
 /// The receiver fields of a prepared scene: which links are gathered at their receiver node
@@ -56,9 +56,9 @@ pub(super) struct Fields {
     pub(super) node: Vec<u32>,
     /// Per field: the expansion centre (the node's area-weighted centroid).
     pub(super) center: Vec<DVec3>,
-    /// Per field: its elements' mean spread ([`crate::hierarchy::links::flat_spread`]) and,
-    /// when its node is flat, the plane's normal (else zero), for [`sums::receiver_spread`].
-    pub(super) receiver: Vec<(f32, [f32; 3])>,
+    /// Per field: its elements' mean spread ([`crate::hierarchy::links::element_spread`]), for
+    /// [`crate::hierarchy::links::receiver_spread`] when its node is flat.
+    pub(super) element_spread: Vec<f32>,
     /// Per field: the nearest field of an ancestor, [`NONE`] when none.
     pub(super) parent: Vec<u32>,
     /// Per field: its irradiance groups `group_start[f] .. group_start[f + 1]`.
@@ -137,16 +137,9 @@ impl Fields {
                 let node = &prepared.tree.nodes[i];
                 let count = (node.elements.1 - node.elements.0).max(1);
                 let spread: f64 = (node.elements.0..node.elements.1)
-                    .map(|e| {
-                        let leaf = prepared.tree.elements[e as usize] as usize;
-                        crate::hierarchy::links::flat_spread(&prepared.tree.nodes[leaf])
-                    })
+                    .map(|e| crate::hierarchy::links::element_spread(&prepared.tree, e as usize))
                     .sum();
-                fields.receiver.push((
-                    (spread / count as f64) as f32,
-                    node.plane
-                        .map_or([0.0; 3], |(normal, _)| normal.as_vec3().to_array()),
-                ));
+                fields.element_spread.push((spread / count as f64) as f32);
                 fields.add_field(i, node.centroid, &keyed[a + near..b], a + near);
             }
         }

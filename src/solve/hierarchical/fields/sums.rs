@@ -109,8 +109,10 @@ impl SweepContext<'_> {
         with_anti: bool,
     ) -> [[f32; C]; ANTI_TERMS] {
         let center = fields.center[f];
-        let (recv_spread, recv_normal) = fields.receiver[f];
-        let recv_normal = glam::Vec3::from_array(recv_normal).as_dvec3();
+        // The receiving elements' extent, when they share the field node's plane.
+        let receiver = self.tree.nodes[fields.node[f] as usize]
+            .plane
+            .map(|(normal, _)| (fields.element_spread[f] as f64, normal));
         let (bin, _) = fields.slot_bin(s);
         let omega = self.bins.solid_angle[bin];
         let mut a = [[0.0f64; C]; ANTI_TERMS];
@@ -124,12 +126,10 @@ impl SweepContext<'_> {
             }
             let inv_r = 1.0 / r2.sqrt();
             let kernel = sender.kernel_toward(v, r2, inv_r);
-            let receiver = if recv_normal == DVec3::ZERO {
-                0.0
-            } else {
-                receiver_spread(recv_spread as f64, recv_normal.dot(v) * inv_r, r2)
-            };
-            let spread = (kernel.irradiance + receiver).max(-0.5 * r2);
+            let spread = kernel.irradiance
+                + receiver.map_or(0.0, |(s_e, n_e)| {
+                    crate::hierarchy::links::receiver_spread(s_e, n_e.dot(v) * inv_r, r2)
+                });
             let (r, big_d) = (r2.sqrt(), r2 + spread);
             let big_d_ar = r2 + kernel.anti;
             let i = intensity[j].map(f64::from);
@@ -264,19 +264,6 @@ impl SweepContext<'_> {
             }
         }
     }
-}
-
-/// The receiving elements' own extent in the irradiance kernel's spread, at squared distance
-/// `r2` from a sender: `s_e (2 - 3 sin^2 theta_e)` for elements of spread `s_e`
-/// ([`crate::hierarchy::links::flat_spread`]) whose normal makes angle `theta_e` with the
-/// direction to the sender (`cos_e` its cosine, either sign), blended into 0 near the sender
-/// ([`crate::hierarchy::links::expansion_weight`]). The receiver's half of the second-order
-/// expansion whose sender half is [`crate::hierarchy::links::NodePoint::kernel_toward`] (its
-/// term in the sender's normal is left out; it raised the closed-box furnace at albedo 0.8 from
-/// 10.05 to 10.08).
-pub(in crate::solve::hierarchical) fn receiver_spread(s_e: f64, cos_e: f64, r2: f64) -> f64 {
-    let w = crate::hierarchy::links::expansion_weight(r2, s_e);
-    (w * s_e * (3.0 * cos_e * cos_e - 1.0)).max(-0.5 * r2)
 }
 
 /// The weights of an irradiance group's terms ([`SweepContext::sum_fields`]) for an element
