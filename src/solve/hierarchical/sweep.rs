@@ -154,52 +154,71 @@ impl SweepContext<'_> {
         .normalize_or_zero();
         let bin = l.bin as usize;
         let mut acc = [0.0f64; C];
-        let mut add = |cos: f64, b: [f64; C], b_back: Option<[f64; C]>, a: [f64; C], both: bool| {
-            if cos > 0.0 {
-                for c in 0..C {
-                    acc[c] += cos * b[c];
-                }
-            } else if let Some(b_back) = b_back {
-                for c in 0..C {
-                    acc[c] -= cos * b_back[c];
-                }
-            }
-            if self.use_anti && (self.two_sided || both || cos < 0.0) {
-                let k = cos.abs();
-                for c in 0..C {
-                    acc[c] -= k * a[c];
-                }
-            }
-        };
+        // The state is read only where a term uses it (see [`pull_term`]).
+        let anti_at = |cos: f64, both: bool| self.use_anti && (self.two_sided || both || cos < 0.0);
         if groups.is_grouped(l.sender) {
             let (g0, g1) = groups.range[l.sender as usize];
             for g in g0 as usize..g1 as usize {
-                add(
-                    groups.normal[g].dot(w),
-                    group_b[g],
-                    group_b_back.get(g).copied(),
-                    group_a[bin * groups.normal.len() + g],
-                    groups.both[g],
+                let cos = groups.normal[g].dot(w);
+                pull_term(
+                    &mut acc,
+                    cos,
+                    || group_b[g],
+                    || group_b_back.get(g).copied(),
+                    anti_at(cos, groups.both[g]).then(|| group_a[bin * groups.normal.len() + g]),
                 );
             }
         } else {
             let (e0, e1) = groups.elements[l.sender as usize];
             for e in e0 as usize..e1 as usize {
-                let a = self.elem_area[e];
-                let a_e = self
-                    .live
-                    .slot(e, bin)
-                    .map_or([0.0; C], |k| anti[k].map(|x| a * x as f64));
-                add(
-                    self.elem_normal[e].dot(w),
-                    radiance[e].map(|x| a * x),
-                    radiance_back.get(e).map(|b| b.map(|x| a * x)),
-                    a_e,
-                    self.elem_back[e],
+                let (a, cos) = (self.elem_area[e], self.elem_normal[e].dot(w));
+                pull_term(
+                    &mut acc,
+                    cos,
+                    || radiance[e].map(|x| a * x),
+                    || radiance_back.get(e).map(|b| b.map(|x| a * x)),
+                    anti_at(cos, self.elem_back[e]).then(|| {
+                        self.live
+                            .slot(e, bin)
+                            .map_or([0.0; C], |k| anti[k].map(|x| a * x as f64))
+                    }),
                 );
             }
         }
         acc.map(|x| x as f32)
+    }
+}
+
+/// Adds one element's or normal group's term to a link's intensity `acc`: `cos` (its normal
+/// against the link's direction) times its radiance `b` through the front when it faces the
+/// receiver, else its back face's `b_back` (two-sided elements), minus `|cos|` times its
+/// antiradiance `a` when the side the link leaves by blocks (`None`: it does not). The
+/// radiance is read only when the term uses it, and the caller reads the antiradiance only
+/// when it counts: the pull is bound by these reads (a front-only sender facing the receiver
+/// never reads its antiradiance; b90_office's pull read it for every term).
+#[inline(always)]
+fn pull_term<const C: usize>(
+    acc: &mut [f64; C],
+    cos: f64,
+    b: impl FnOnce() -> [f64; C],
+    b_back: impl FnOnce() -> Option<[f64; C]>,
+    a: Option<[f64; C]>,
+) {
+    if cos > 0.0 {
+        let b = b();
+        for c in 0..C {
+            acc[c] += cos * b[c];
+        }
+    } else if let Some(b_back) = b_back() {
+        for c in 0..C {
+            acc[c] -= cos * b_back[c];
+        }
+    }
+    if let Some(a) = a {
+        let k = cos.abs();
+        for c in 0..C {
+            acc[c] -= k * a[c];
+        }
     }
 }
 
