@@ -63,6 +63,52 @@ impl<const C: usize> Scratch<C> {
     }
 }
 
+/// The state a window of [`crate::solve::convergence::WINDOW_SWEEPS`] sweeps started from (radiance of the fronts, then
+/// of the back faces, f32), for the net change [`Convergence::record_window`] takes.
+struct Window<const C: usize> {
+    start: Vec<[f32; C]>,
+    sweeps: usize,
+}
+
+impl<const C: usize> Window<C> {
+    /// Bytes of the window's copy of a state of `n` elements with `backs` back faces.
+    fn bytes(n: usize, backs: usize) -> u64 {
+        ((n + backs) * std::mem::size_of::<[f32; C]>()) as u64
+    }
+
+    /// Counts a sweep whose output is `radiance` and `radiance_back` (per element, empty when
+    /// no element is two-sided); every [`crate::solve::convergence::WINDOW_SWEEPS`] sweeps returns the net relative change
+    /// since the window's start, area-weighted L1 as the sweeps' own change, and starts the
+    /// next window there.
+    fn sweep(
+        &mut self,
+        (radiance, radiance_back): (&[[f64; C]], &[[f64; C]]),
+        area: &[f64],
+    ) -> Option<f64> {
+        let state = radiance.iter().chain(radiance_back);
+        let areas = area.iter().chain(area.iter().take(radiance_back.len()));
+        if self.start.is_empty() {
+            self.start = state.map(|b| b.map(|x| x as f32)).collect();
+            self.sweeps = 0;
+            return None;
+        }
+        self.sweeps += 1;
+        if self.sweeps < crate::solve::convergence::WINDOW_SWEEPS {
+            return None;
+        }
+        let (mut num, mut den) = (0.0f64, 0.0f64);
+        for ((b, start), &a) in state.zip(self.start.iter_mut()).zip(areas) {
+            for c in 0..C {
+                num += a * (b[c] - f64::from(start[c])).abs();
+                den += a * b[c].abs();
+            }
+            *start = b.map(|x| x as f32);
+        }
+        self.sweeps = 0;
+        Some(change_ratio(num, den))
+    }
+}
+
 /// Going on from `resume`: Anderson's history when it has the state's length
 /// (`going_on.1`), and, when going on with the same source (`going_on.0`), its convergence
 /// estimate, health guard and counts. Returns the first sweep's number and the history.
@@ -166,6 +212,12 @@ impl Prepared {
             projection: guard.projection(),
         };
 
+        // Mixed sweeps also measure their net change over windows of sweeps
+        // ([`Convergence::record_window`]).
+        let mut window = anderson.is_some().then(|| Window::<C> {
+            start: Vec::new(),
+            sweeps: 0,
+        });
         let mut last = first - 1;
         let (tol, max_iterations) = (options.tol, options.max_iterations);
         for iteration in first..first + max_iterations {
@@ -185,6 +237,12 @@ impl Prepared {
             std::mem::swap(&mut radiance, &mut next_radiance);
             std::mem::swap(&mut radiance_back, &mut next_radiance_back);
             std::mem::swap(&mut anti, &mut next_anti);
+            if let Some(net) = window
+                .as_mut()
+                .and_then(|w| w.sweep((&radiance, &radiance_back), &self.elem_area))
+            {
+                convergence.record_window(net);
+            }
             if end_sweep(
                 iteration,
                 change,
@@ -202,6 +260,9 @@ impl Prepared {
             if start_damping(iteration, &mut guard, &mut convergence, &mut stats) {
                 if let Some(acc) = anderson.as_mut() {
                     acc.restart();
+                }
+                if let Some(w) = window.as_mut() {
+                    w.start.clear();
                 }
             }
             if self.settle_sweep(
@@ -231,7 +292,7 @@ impl Prepared {
         stats.residual = convergence.residual;
         // The sweeps' buffers go before the result is assembled, so that they do not add to its
         // peak (at 1M triangles the link intensities alone are hundreds of MB).
-        drop((scratch, two_back, x_flat, g_flat));
+        drop((scratch, two_back, x_flat, g_flat, window));
         drop((next_radiance, next_radiance_back, next_anti));
 
         self.finish_channels(
@@ -540,7 +601,9 @@ impl Prepared {
         // with the largest albedo as the contraction bound instead.
         let state_len = state_len_of::<C>(n + backs, slots);
         let depth = options.acceleration_depth;
-        let history = Anderson::bytes(state_len, depth) + 16 * state_len as u64;
+        let history = Anderson::bytes(state_len, depth)
+            + 16 * state_len as u64
+            + Window::<C>::bytes(n, backs);
         let mb = |bytes: u64| bytes.div_ceil(1 << 20);
         let off = if depth == 0 {
             Some("acceleration_depth 0".to_string())
