@@ -63,8 +63,9 @@ impl<const C: usize> Scratch<C> {
     }
 }
 
-/// The state a window of [`crate::solve::convergence::WINDOW_SWEEPS`] sweeps started from (radiance of the fronts, then
-/// of the back faces, f32), for the net change [`Convergence::record_window`] takes.
+/// The state a window of [`crate::solve::convergence::WINDOW_SWEEPS`] sweeps started from
+/// (radiance of the fronts, then of the back faces, f32), for the net change
+/// [`Convergence::record_window`] takes.
 struct Window<const C: usize> {
     start: Vec<[f32; C]>,
     sweeps: usize,
@@ -77,9 +78,9 @@ impl<const C: usize> Window<C> {
     }
 
     /// Counts a sweep whose output is `radiance` and `radiance_back` (per element, empty when
-    /// no element is two-sided); every [`crate::solve::convergence::WINDOW_SWEEPS`] sweeps returns the net relative change
-    /// since the window's start, area-weighted L1 as the sweeps' own change, and starts the
-    /// next window there.
+    /// no element is two-sided); every [`crate::solve::convergence::WINDOW_SWEEPS`] sweeps
+    /// returns the net relative change since the window's start, area-weighted L1 as the
+    /// sweeps' own change, and starts the next window there.
     fn sweep(
         &mut self,
         (radiance, radiance_back): (&[[f64; C]], &[[f64; C]]),
