@@ -195,7 +195,7 @@ impl SweepContext<'_> {
 /// antiradiance `a` when the side the link leaves by blocks (`None`: it does not). The
 /// radiance is read only when the term uses it, and the caller reads the antiradiance only
 /// when it counts: the pull is bound by these reads (a front-only sender facing the receiver
-/// never reads its antiradiance; b90_office's pull read it for every term).
+/// never reads its antiradiance).
 #[inline(always)]
 fn pull_term<const C: usize>(
     acc: &mut [f64; C],

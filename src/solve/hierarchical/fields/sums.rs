@@ -124,13 +124,14 @@ impl SweepContext<'_> {
             if !(r2 > 0.0) {
                 continue;
             }
-            let inv_r = 1.0 / r2.sqrt();
+            let r = r2.sqrt();
+            let inv_r = 1.0 / r;
             let kernel = sender.kernel_toward(v, r2, inv_r);
             let spread = kernel.irradiance
                 + receiver.map_or(0.0, |(s_e, n_e)| {
                     crate::hierarchy::links::receiver_spread(s_e, n_e.dot(v) * inv_r, r2)
                 });
-            let (r, big_d) = (r2.sqrt(), r2 + spread);
+            let big_d = r2 + spread;
             let big_d_ar = r2 + kernel.anti;
             let i = intensity[j].map(f64::from);
             let vv = [v.x, v.y, v.z];
