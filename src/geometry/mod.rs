@@ -28,6 +28,12 @@ pub fn area(tri: &Tri) -> f64 {
     0.5 * (tri[1] - tri[0]).cross(tri[2] - tri[0]).length()
 }
 
+/// A point as a hash key: the bits of its coordinates, with -0.0 folded into 0.0 so that equal
+/// points give equal keys. Corners shared by triangles (bit-identical) share their key.
+pub fn point_key(p: DVec3) -> [u64; 3] {
+    p.to_array().map(|x| (x + 0.0).to_bits())
+}
+
 /// Centroid of a triangle.
 pub fn centroid(tri: &Tri) -> DVec3 {
     (tri[0] + tri[1] + tri[2]) / 3.0

@@ -149,7 +149,7 @@ fn edges_of(patches: &Patches) -> (Vec<[u32; 3]>, Vec<Edge>) {
     let n = patches.len();
     let mut ids: HashMap<[u64; 3], u32> = HashMap::new();
     let mut vid = |p: DVec3| {
-        let key = [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
+        let key = crate::geometry::point_key(p);
         let next = ids.len() as u32;
         *ids.entry(key).or_insert(next)
     };

@@ -248,13 +248,7 @@ pub(crate) struct Welded {
 /// (degenerate) patches keep three vertices of their own.
 pub(crate) fn weld(patches: &Patches, solution: &Solution) -> Welded {
     let cos_crease = CREASE_ANGLE_DEG.to_radians().cos();
-    let key = |p: DVec3| {
-        [
-            (p.x + 0.0).to_bits(),
-            (p.y + 0.0).to_bits(),
-            (p.z + 0.0).to_bits(),
-        ]
-    };
+    let key = crate::geometry::point_key;
     let mut buckets: HashMap<[u64; 3], Vec<u32>> = HashMap::new();
     let mut positions = Vec::new();
     let mut normals: Vec<DVec3> = Vec::new();

@@ -478,11 +478,7 @@ impl Scene {
 /// A triangle's corners as bits, in a cyclic order ([`canonical_rotation`]).
 type CornerKey = [[u64; 3]; 3];
 
-/// A corner's coordinates as bits; `+ 0.0` turns -0.0 into 0.0, so that equal coordinates get
-/// equal keys.
-fn corner_key(p: DVec3) -> [u64; 3] {
-    p.to_array().map(|x| (x + 0.0).to_bits())
-}
+use crate::geometry::point_key as corner_key;
 
 /// The rotation of `k` that starts at its smallest corner: the same for every cyclic order of
 /// the same corners, different for the reversed order.

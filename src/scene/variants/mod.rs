@@ -174,10 +174,7 @@ pub fn map_path(out: &Path) -> PathBuf {
     out.with_extension("map.csv")
 }
 
-/// `p` as a hash key: the bits of its coordinates (`+ 0.0` makes -0.0 and 0.0 equal).
-fn key(p: DVec3) -> [u64; 3] {
-    p.to_array().map(|x| (x + 0.0).to_bits())
-}
+use crate::geometry::point_key as key;
 
 /// An undirected edge by the keys of its two ends, the lower first.
 type EdgeKey = ([u64; 3], [u64; 3]);

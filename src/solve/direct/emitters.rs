@@ -170,15 +170,6 @@ const PLANAR: f64 = 1e-9;
 /// No member across this edge (see [`edge_neighbours`]).
 pub(super) const NO_NEIGHBOUR: u32 = u32::MAX;
 
-/// A point's bits as a hash key (with -0.0 folded into 0.0, so equal points give equal keys).
-pub(super) fn point_key(p: DVec3) -> [u64; 3] {
-    [
-        (p.x + 0.0).to_bits(),
-        (p.y + 0.0).to_bits(),
-        (p.z + 0.0).to_bits(),
-    ]
-}
-
 /// Root of `i` in a union-find forest (with path halving).
 pub(super) fn find_root(parent: &mut [u32], mut i: u32) -> u32 {
     while parent[i as usize] != i {

@@ -58,7 +58,7 @@ use crate::geometry::raytrace::RayScene;
 use crate::geometry::sampling::{point_on_triangle, Rng};
 use crate::geometry::tolerances::GROUP_NORMAL_TOLERANCE;
 use crate::geometry::tolerances::{SAMPLE_BELOW_ONE, TIGHTER};
-use crate::geometry::{self, plane_tol, PLANE_EPS};
+use crate::geometry::{self, plane_tol, point_key, PLANE_EPS};
 use crate::mesh::Patches;
 use crate::progress::Progress;
 use crate::solve::hierarchical::Element;
