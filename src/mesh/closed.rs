@@ -426,6 +426,31 @@ mod tests {
         }
     }
 
+    /// Every triangle with its own copies of its corners, and the copies at x = 0 of every other
+    /// triangle written as -0.0 (as an exporter that transforms each copy on its own may):
+    /// the corners still meet, and the cube is one closed object.
+    #[test]
+    fn a_cube_whose_corner_copies_differ_by_the_sign_of_zero_is_closed() {
+        let mut scene = scene_with_cube();
+        let mut positions = Vec::new();
+        for t in 0..scene.triangles.len() {
+            let base = positions.len() as u32;
+            for k in scene.triangles[t] {
+                let mut p = scene.positions[k as usize];
+                if t % 2 == 0 && p.x == 0.0 {
+                    p.x = -0.0;
+                }
+                positions.push(p);
+            }
+            scene.triangles[t] = [base, base + 1, base + 2];
+        }
+        assert!(positions
+            .iter()
+            .any(|p| p.x == 0.0 && p.x.is_sign_negative()));
+        scene.positions = positions;
+        assert_eq!(turned(&scene), (vec![], 1));
+    }
+
     #[test]
     fn a_consistently_outward_cube_turns_nothing() {
         assert_eq!(turned(&scene_with_cube()), (vec![], 1));
