@@ -42,6 +42,7 @@ use glam::DVec3;
 
 use crate::error::{Error, Result};
 use crate::files::write_atomic;
+use crate::geometry::point_key;
 use crate::geometry::tolerances::{
     DEPTH_TIE_RELATIVE, MIN_SCREEN_AREA, NEAR_PLANE_RELATIVE, SAME_POINT_RELATIVE,
 };
@@ -248,7 +249,6 @@ pub(crate) struct Welded {
 /// (degenerate) patches keep three vertices of their own.
 pub(crate) fn weld(patches: &Patches, solution: &Solution) -> Welded {
     let cos_crease = CREASE_ANGLE_DEG.to_radians().cos();
-    let key = crate::geometry::point_key;
     let mut buckets: HashMap<[u64; 3], Vec<u32>> = HashMap::new();
     let mut positions = Vec::new();
     let mut normals: Vec<DVec3> = Vec::new();
@@ -263,7 +263,7 @@ pub(crate) fn weld(patches: &Patches, solution: &Solution) -> Welded {
         let mut face = [0u32; 3];
         for (k, &c) in patches.corners[p].iter().enumerate() {
             let existing = if patches.active[p] {
-                buckets.get(&key(c)).and_then(|vs| {
+                buckets.get(&point_key(c)).and_then(|vs| {
                     vs.iter().copied().find(|&v| {
                         emissive[v as usize] == em && normals[v as usize].dot(n) >= cos_crease
                     })
@@ -278,7 +278,7 @@ pub(crate) fn weld(patches: &Patches, solution: &Solution) -> Welded {
                 emissive.push(em);
                 weighted.push(([0.0; 3], 0.0, [0.0; 3], 0.0));
                 if patches.active[p] {
-                    buckets.entry(key(c)).or_default().push(v);
+                    buckets.entry(point_key(c)).or_default().push(v);
                 }
                 v
             });

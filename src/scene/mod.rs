@@ -22,6 +22,7 @@ use std::path::PathBuf;
 use glam::DVec3;
 
 use crate::error::{Error, Result, Warning};
+use crate::geometry::point_key;
 
 /// Largest number of patches a `max_edge` may split a scene into (and most triangles a generated scene may have) (a guard against a typo such
 /// as a length in the wrong unit, which would otherwise exhaust memory before any message; a
@@ -424,7 +425,7 @@ impl Scene {
                 if self.is_degenerate(t) || duplicate(t) {
                     return None;
                 }
-                let [a, b, c] = self.corners(t).map(corner_key);
+                let [a, b, c] = self.corners(t).map(point_key);
                 let reversed = canonical_rotation([a, c, b]);
                 let i = keyed.partition_point(|(k, _)| *k < reversed);
                 let &(k, u) = keyed.get(i)?;
@@ -463,12 +464,7 @@ impl Scene {
         let mut keyed: Vec<(CornerKey, u32)> = (0..self.len())
             .into_par_iter()
             .filter(|&t| keep(t) && !self.is_degenerate(t))
-            .map(|t| {
-                (
-                    canonical_rotation(self.corners(t).map(corner_key)),
-                    t as u32,
-                )
-            })
+            .map(|t| (canonical_rotation(self.corners(t).map(point_key)), t as u32))
             .collect();
         keyed.par_sort_unstable();
         keyed
@@ -477,8 +473,6 @@ impl Scene {
 
 /// A triangle's corners as bits, in a cyclic order ([`canonical_rotation`]).
 type CornerKey = [[u64; 3]; 3];
-
-use crate::geometry::point_key as corner_key;
 
 /// The rotation of `k` that starts at its smallest corner: the same for every cyclic order of
 /// the same corners, different for the reversed order.

@@ -67,8 +67,8 @@ pub(super) fn merge_region(scene: &Scene, region: &[usize], frame: &PlaneFrame) 
         let c = scene.corners(t);
         for e in 0..3 {
             let (a, b) = (c[e], c[(e + 1) % 3]);
-            position.insert(key(a), a);
-            *directed.entry((key(a), key(b))).or_default() += 1;
+            position.insert(point_key(a), a);
+            *directed.entry((point_key(a), point_key(b))).or_default() += 1;
         }
     }
     if directed.values().any(|&n| n > 1) {
@@ -79,7 +79,7 @@ pub(super) fn merge_region(scene: &Scene, region: &[usize], frame: &PlaneFrame) 
     for &t in region {
         let c = scene.corners(t);
         for e in 0..3 {
-            let (a, b) = (key(c[e]), key(c[(e + 1) % 3]));
+            let (a, b) = (point_key(c[e]), point_key(c[(e + 1) % 3]));
             if !directed.contains_key(&(b, a)) {
                 if next.insert(a, b).is_some() {
                     return None;
@@ -298,7 +298,7 @@ fn flat_regions(scene: &Scene, normals: &[DVec3], live: &[bool], tol: f64) -> Ve
         }
         let ((t1, e1), (t2, e2)) = (sides[0], sides[1]);
         let (c1, c2) = (scene.corners(t1), scene.corners(t2));
-        let opposite = key(c1[e1]) == key(c2[(e2 + 1) % 3]);
+        let opposite = point_key(c1[e1]) == point_key(c2[(e2 + 1) % 3]);
         let far = c2[(e2 + 2) % 3];
         if opposite
             && same_material(scene, t1, t2)
@@ -401,7 +401,7 @@ fn nearest_object(
     let mut objects = UnionFind::new(n);
     for t in (0..n).filter(|&t| live[t] && !in_region[t]) {
         for p in scene.corners(t) {
-            let first = *by_vertex.entry(key(p)).or_insert(t);
+            let first = *by_vertex.entry(point_key(p)).or_insert(t);
             objects.union(first, t);
         }
     }

@@ -159,7 +159,7 @@ fn edge_points_of(
     std::array::from_fn(|e| {
         let (a, b) = (c[e], c[(e + 1) % 3]);
         let k = edge_key(a, b);
-        let forward = key(a) <= key(b);
+        let forward = point_key(a) <= point_key(b);
         let (lo, hi) = if forward { (a, b) } else { (b, a) };
         let mut list: Vec<EdgePoint> = points
             .get(&k)
@@ -257,8 +257,8 @@ pub(super) fn jitter(scene: &Scene, distance: f64, seed: u64) -> Out {
     let mut out = Out::default();
     for t in 0..scene.len() {
         let c = scene.corners(t).map(|p| {
-            *moved.entry(key(p)).or_insert_with(|| {
-                let k = key(p);
+            *moved.entry(point_key(p)).or_insert_with(|| {
+                let k = point_key(p);
                 let index = mix64(k[0]) ^ mix64(k[1] ^ 0x9e37_79b9) ^ mix64(k[2] ^ 0x7f4a_7c15);
                 let mut rng = Rng::new(seed, index);
                 // Uniform in the ball, by rejection; a hair inside so that rounding p + d

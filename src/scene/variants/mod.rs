@@ -26,6 +26,7 @@ use std::path::{Path, PathBuf};
 use glam::DVec3;
 
 use crate::error::{Error, Result};
+use crate::geometry::point_key;
 use crate::scene::Scene;
 use crate::scene::MAX_PATCHES;
 
@@ -174,8 +175,6 @@ pub fn map_path(out: &Path) -> PathBuf {
     out.with_extension("map.csv")
 }
 
-use crate::geometry::point_key as key;
-
 /// An undirected edge by the keys of its two ends, the lower first.
 type EdgeKey = ([u64; 3], [u64; 3]);
 
@@ -207,7 +206,7 @@ pub(super) struct Edges {
 }
 
 pub(super) fn edge_key(a: DVec3, b: DVec3) -> EdgeKey {
-    let (ka, kb) = (key(a), key(b));
+    let (ka, kb) = (point_key(a), point_key(b));
     if ka <= kb {
         (ka, kb)
     } else {
@@ -446,7 +445,7 @@ fn assemble(
     for &v in &order {
         let s = out.source[v] as usize;
         let tri = out.tris[v].map(|p| {
-            *vertex_of.entry(key(p)).or_insert_with(|| {
+            *vertex_of.entry(point_key(p)).or_insert_with(|| {
                 scene.positions.push(p);
                 (scene.positions.len() - 1) as u32
             })
