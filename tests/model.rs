@@ -139,3 +139,38 @@ fn pair_cache_does_not_change_the_result() {
     assert!(diff < 1e-5, "cached against computed factors: {diff}");
     assert!(cached.stats.solver_bytes > uncached.stats.solver_bytes);
 }
+
+/// A scene in which nothing emits and that has no light is answered 0 without a model, by
+/// both solvers; lit by an analytic light instead, the same scene is solved.
+#[test]
+fn a_scene_without_light_is_answered_dark_without_a_model() {
+    use antiradiance::scene::lights::Light;
+    use antiradiance::solve::{run, SolverKind};
+    let mut scene = generated::occluder_scene();
+    for e in &mut scene.emission {
+        *e = [0.0; 3];
+    }
+    let options = SolverOptions::default();
+    let dark = build_patches(&scene, None);
+    assert!(dark.is_dark());
+    for kind in [SolverKind::Hierarchical, SolverKind::Dense] {
+        let solution = run(kind, &dark, &options, &Progress::hidden()).unwrap();
+        assert!(solution.stats.converged, "{kind:?}");
+        assert_eq!(solution.stats.iterations, 0, "{kind:?}");
+        assert_eq!(solution.stats.links, 0, "{kind:?}");
+        assert_eq!(solution.triangle_radiance.len(), scene.len(), "{kind:?}");
+        assert!(
+            (solution.triangle_radiance.iter()).all(|b| *b == [0.0; 3]),
+            "{kind:?}"
+        );
+    }
+    scene.lights.push(Light::Point {
+        position: glam::DVec3::new(0.0, 1.0, 0.0),
+        intensity: [1.0; 3],
+    });
+    let lit = build_patches(&scene, None);
+    assert!(!lit.is_dark());
+    let solution = run(SolverKind::Hierarchical, &lit, &options, &Progress::hidden()).unwrap();
+    assert!(solution.stats.iterations > 0 && solution.stats.links > 0);
+    assert!(solution.triangle_radiance.iter().any(|b| b[0] > 0.0));
+}

@@ -120,6 +120,12 @@ impl Patches {
         (0..self.len()).any(|p| self.is_two_sided(p))
     }
 
+    /// True when no patch emits and the scene has no analytic light: the radiance is 0
+    /// everywhere.
+    pub fn is_dark(&self) -> bool {
+        self.lights.is_empty() && self.emission.iter().all(|e| *e == [0.0; 3])
+    }
+
     /// Turns patch `p` around: corners reversed, normal negated, and its back face's analytic
     /// source (`source_back`, 0 when none) made its front's. Its albedo and emission stay.
     pub fn turn_around(&mut self, p: usize) {

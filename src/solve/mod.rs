@@ -96,12 +96,20 @@ impl Preset {
 ///
 /// Errors: [`crate::Error::Memory`] when the solve does not fit `options.memory_limit_bytes` (see
 /// [`crate::solve::budget`]).
+///
+/// A scene in which nothing emits and that has no analytic light ([`Patches::is_dark`]) is
+/// answered without a solve: radiance 0 everywhere, `stats.iterations` 0, converged.
 pub fn run(
     kind: SolverKind,
     patches: &Patches,
     options: &SolverOptions,
     progress: &Progress,
 ) -> Result<Solution> {
+    // Nothing emits and there is no analytic light: B = 0 is the answer (the only one,
+    // every albedo being below 1), and no model is built for it.
+    if patches.is_dark() {
+        return Ok(Solution::dark(patches));
+    }
     // Two-sided emitters just in front of a surface: their gaps are solved on their own, the
     // rest of the scene with them one-sided (see `cavity`).
     let cavities = if options.antiradiance {

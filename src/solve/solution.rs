@@ -217,6 +217,17 @@ impl SolveStats {
 }
 
 impl Solution {
+    /// The answer for a scene in which nothing emits and that has no analytic light
+    /// ([`Patches::is_dark`]): radiance 0 on every face, converged after no iteration.
+    pub fn dark(patches: &Patches) -> Solution {
+        let zero = vec![[0.0; 3]; patches.len()];
+        let stats = SolveStats {
+            converged: true,
+            ..SolveStats::default()
+        };
+        Solution::from_normalized_sides(patches, &zero, &zero, stats)
+    }
+
     /// Builds a solution from per-patch radiance given in the patches' normalized emission units.
     /// Inactive patches are then settled as [`Solution::settle_inactive`] describes, whatever
     /// value `normalized` gave them.
