@@ -170,7 +170,13 @@ fn a_scene_without_light_is_answered_dark_without_a_model() {
     });
     let lit = build_patches(&scene, None);
     assert!(!lit.is_dark());
-    let solution = run(SolverKind::Hierarchical, &lit, &options, &Progress::hidden()).unwrap();
+    let solution = run(
+        SolverKind::Hierarchical,
+        &lit,
+        &options,
+        &Progress::hidden(),
+    )
+    .unwrap();
     assert!(solution.stats.iterations > 0 && solution.stats.links > 0);
     assert!(solution.triangle_radiance.iter().any(|b| b[0] > 0.0));
 }
