@@ -126,6 +126,26 @@ impl Convergence {
         self.error_estimate < tol
     }
 
+    /// Sweeps still needed to reach `tol`, predicted from the last sweep's contraction ratio
+    /// `q`: the residual `r` shrinks by `q` a sweep and the solve stops once `r / (1 - q')` is
+    /// under `tol` (`q'` is `q` floored by [`Convergence::contraction_bound`], as in
+    /// [`Convergence::update`]). `None` before two residuals, or when the last sweep did not
+    /// contract (`q` not in (0, 1)).
+    pub fn sweeps_left(&self, tol: f64) -> Option<f64> {
+        let &q = self.ratios.last()?;
+        if !(q > 0.0 && q < 1.0) {
+            return None;
+        }
+        if !(self.residual > 0.0) {
+            return Some(0.0);
+        }
+        let floored = q
+            .max(self.contraction_bound.unwrap_or(0.0))
+            .min(MAX_CONTRACTION);
+        let target = tol * (1.0 - floored);
+        Some(((target / self.residual).ln() / q.ln()).max(0.0))
+    }
+
     /// Records the residual of sweep `iteration` (1-based); true when the solve should stop:
     /// the estimated remaining error is under `tol` and at least [`MIN_SWEEPS`] sweeps ran (the
     /// first ones only propagate emission: light must bounce once and antiradiance must have had
@@ -339,6 +359,41 @@ pub fn end_sweep(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Residuals shrinking by a steady ratio: after three, `sweeps_left` predicts the sweeps
+    /// [`Convergence::update`] then takes to stop, within one; with a contraction bound above
+    /// the ratio (mixed sweeps), more of them.
+    #[test]
+    fn sweeps_left_predicts_a_steady_contraction() {
+        for (q, tol, bound) in [(0.5, 1e-3, None), (0.9, 1e-4, None), (0.4, 1e-3, Some(0.8))] {
+            let mut c = Convergence {
+                contraction_bound: bound,
+                ..Convergence::default()
+            };
+            let mut r = 0.3;
+            for _ in 0..3 {
+                c.update(r, tol);
+                r *= q;
+            }
+            let Some(predicted) = c.sweeps_left(tol) else {
+                panic!("no prediction at q = {q}");
+            };
+            let mut taken = 0;
+            while !c.update(r, tol) {
+                r *= q;
+                taken += 1;
+            }
+            assert!(
+                (predicted - taken as f64).abs() <= 1.0,
+                "q {q}, tol {tol}, bound {bound:?}: predicted {predicted}, took {taken}"
+            );
+        }
+        // A sweep that grew predicts nothing.
+        let mut c = Convergence::default();
+        c.update(0.1, 1e-3);
+        c.update(0.2, 1e-3);
+        assert_eq!(c.sweeps_left(1e-3), None);
+    }
 
     /// The jumps a solve would make over `sweeps` residuals starting at 1, each the one before
     /// times `steps` in turn: (sweep, over two sweeps?, factor), the one-sweep jump tried first

@@ -72,9 +72,10 @@ pub struct SolverOptions {
     /// left to the per-element gather (the rest go through receiver fields, see
     /// [`Self::field_ratio`]); 0 disables it. 256 by default: the seed room's pairs take 1.3 MB
     /// and the 258k-triangle box's 35 MB; at 1024 the 1M-triangle box cached 523 MB of them
-    /// and peaked at 4.4 GB. A solve still sweeping after 10 sweeps builds the cache then,
-    /// larger than this if need be, within what the memory limit leaves: the sweeps that remain
-    /// pay for it many times over (b90_office, 30 sweeps: about 590 MB).
+    /// and peaked at 4.4 GB. A solve still sweeping after 10 sweeps, or whose first 3 sweeps
+    /// predict 10 more, builds the cache then, larger than this if need be, within what the
+    /// memory limit leaves: the sweeps that remain pay for it many times over (b90_office, 26
+    /// sweeps: about 550 MB, built after its third).
     pub pair_cache_mb: usize,
     /// Anderson acceleration of the hierarchical solver's sweeps: how many past sweeps each new
     /// state mixes ([`crate::solve::accelerate`]). 0 gives plain Jacobi sweeps with the tail

@@ -3,6 +3,7 @@
 //! next solve starts from.
 
 use super::*;
+use crate::solve::MIN_SWEEPS;
 
 /// Where a solve starts: the per-element source and albedo in `C` channels, the state the
 /// sweeps start from, and how it relates to the warm state given.
@@ -282,7 +283,11 @@ impl Prepared {
                 std::mem::swap(b_back, &mut next_radiance_back);
                 std::mem::swap(a, &mut next_anti);
             }
-            if iteration + 1 - first == LATE_PAIR_CACHE_SWEEPS {
+            let swept = iteration + 1 - first;
+            let long = |left: f64| left >= LATE_PAIR_CACHE_SWEEPS as f64;
+            if swept == LATE_PAIR_CACHE_SWEEPS
+                || (swept == MIN_SWEEPS && convergence.sweeps_left(tol).is_some_and(long))
+            {
                 self.late_pair_cache(&mut memory);
             }
             if out_of_time(deadline, sweep_start) {
@@ -362,11 +367,12 @@ impl Prepared {
         Some((radiance.to_vec(), radiance_back.to_vec(), anti.to_vec()))
     }
 
-    /// Builds the pair cache of a solve that has run [`LATE_PAIR_CACHE_SWEEPS`] sweeps without
-    /// one (its factors did not fit [`crate::solve::SolverOptions::pair_cache_mb`]) when it
-    /// fits what the memory limit leaves beside `memory`'s estimate, which then counts it. The
-    /// cache turns each later sweep's gather into a stream; a solve that needs this many sweeps
-    /// has many left to save on.
+    /// Builds the pair cache of a solve without one (its factors did not fit
+    /// [`crate::solve::SolverOptions::pair_cache_mb`]) that has run [`LATE_PAIR_CACHE_SWEEPS`]
+    /// sweeps, or [`MIN_SWEEPS`](crate::solve::MIN_SWEEPS) whose contraction predicts at least as many more
+    /// ([`Convergence::sweeps_left`]), when it fits what the memory limit leaves beside
+    /// `memory`'s estimate, which then counts it. The cache turns each later sweep's gather
+    /// into a stream; a solve that needs this many sweeps has many left to save on.
     fn late_pair_cache(&mut self, memory: &mut MemoryStats) {
         if self.pairs.is_some() || self.options.pair_cache_mb == 0 {
             return;

@@ -188,3 +188,34 @@ fn a_long_solve_builds_its_pair_cache_late() {
         }
     }
 }
+
+/// A solve whose pair cache did not fit its own budget builds it after
+/// [`crate::solve::MIN_SWEEPS`] sweeps when their contraction predicts at least
+/// [`LATE_PAIR_CACHE_SWEEPS`] more (plain sweeps to a tolerance of 1e-12), and not when it
+/// predicts fewer (the default tolerance, mixed sweeps).
+#[test]
+fn a_solve_predicted_long_builds_its_pair_cache_after_its_first_sweeps() {
+    let patches = build_patches(&generated::cornell_box(), Some(100.0));
+    let hidden = Progress::hidden();
+    let cached_after_min_sweeps = |acceleration_depth, tol| {
+        let options = SolverOptions {
+            pair_cache_mb: 0,
+            acceleration_depth,
+            tol,
+            max_iterations: crate::solve::MIN_SWEEPS,
+            direct_light: false,
+            ..SolverOptions::default()
+        };
+        let mut prepared = match Prepared::new(&patches, &options, false) {
+            Ok(prepared) => prepared,
+            Err(e) => panic!("the box does not fit: {e}"),
+        };
+        prepared.options.pair_cache_mb = 1;
+        assert!(prepared.pairs.is_none());
+        let (solution, _) = prepared.solve(&patches, &hidden);
+        assert_eq!(solution.stats.iterations, crate::solve::MIN_SWEEPS);
+        prepared.pairs.is_some()
+    };
+    assert!(cached_after_min_sweeps(0, 1e-12));
+    assert!(!cached_after_min_sweeps(4, 1e-3));
+}
