@@ -369,7 +369,7 @@ impl Prepared {
 
     /// Builds the pair cache of a solve without one (its factors did not fit
     /// [`crate::solve::SolverOptions::pair_cache_mb`]) that has run [`LATE_PAIR_CACHE_SWEEPS`]
-    /// sweeps, or [`MIN_SWEEPS`](crate::solve::MIN_SWEEPS) whose contraction predicts at least as many more
+    /// sweeps, or [`MIN_SWEEPS`] whose contraction predicts at least as many more
     /// ([`Convergence::sweeps_left`]), when it fits what the memory limit leaves beside
     /// `memory`'s estimate, which then counts it. The cache turns each later sweep's gather
     /// into a stream; a solve that needs this many sweeps has many left to save on.
