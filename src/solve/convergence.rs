@@ -111,9 +111,7 @@ impl Convergence {
         }
         self.since_extrapolation += 1;
         self.previous = Some(residual);
-        let q = q
-            .max(self.contraction_bound.unwrap_or(0.0))
-            .min(MAX_CONTRACTION);
+        let q = self.estimate_ratio(q);
         self.error_estimate = if residual == 0.0 {
             0.0
         } else {
@@ -126,10 +124,17 @@ impl Convergence {
         self.error_estimate < tol
     }
 
+    /// The contraction ratio the error estimate takes for a measured ratio `q`: at least
+    /// [`Convergence::contraction_bound`], at most [`MAX_CONTRACTION`].
+    fn estimate_ratio(&self, q: f64) -> f64 {
+        q.max(self.contraction_bound.unwrap_or(0.0))
+            .min(MAX_CONTRACTION)
+    }
+
     /// Sweeps still needed to reach `tol`, predicted from the last sweep's contraction ratio
     /// `q`: the residual `r` shrinks by `q` a sweep and the solve stops once `r / (1 - q')` is
-    /// under `tol` (`q'` is `q` floored by [`Convergence::contraction_bound`], as in
-    /// [`Convergence::update`]). `None` before two residuals, or when the last sweep did not
+    /// under `tol` (`q'` the ratio [`Convergence::update`]'s estimate takes for `q`,
+    /// `estimate_ratio`). `None` before two residuals, or when the last sweep did not
     /// contract (`q` not in (0, 1)).
     pub fn sweeps_left(&self, tol: f64) -> Option<f64> {
         let &q = self.ratios.last()?;
@@ -139,10 +144,7 @@ impl Convergence {
         if !(self.residual > 0.0) {
             return Some(0.0);
         }
-        let floored = q
-            .max(self.contraction_bound.unwrap_or(0.0))
-            .min(MAX_CONTRACTION);
-        let target = tol * (1.0 - floored);
+        let target = tol * (1.0 - self.estimate_ratio(q));
         Some(((target / self.residual).ln() / q.ln()).max(0.0))
     }
 
