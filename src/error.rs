@@ -98,6 +98,9 @@ pub enum WarningKind {
     /// Something the scene file asks for is not modelled and is ignored (a glTF extension,
     /// a double-sided material, a light's range, primitives that are not triangles).
     Unsupported,
+    /// A polygon could not be triangulated within its outline (it crosses itself) and was
+    /// fanned.
+    Polygon,
 }
 
 /// A finding that does not stop the work (a missing material, a solve that hit its iteration

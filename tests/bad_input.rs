@@ -199,20 +199,62 @@ fn homogeneous_vertices() {
 
 #[test]
 fn short_colour_lines_in_mtl() {
-    // tobj 4.0.5 panics on these; the scanner must stop them first.
-    reject_mtl("newmtl a\nKd 0.5\n", 2);
+    // tobj 4.0.5 panics on short colour lines; the scanner must stop them first.
     reject_mtl("newmtl a\nKd 0.5 0.5 0.5\nKe 1 2\n", 3);
-    reject_mtl("newmtl a\nKa 0.5\n", 2);
-    reject_mtl("newmtl a\nKs\n", 2);
+    reject_mtl("newmtl a\nKd\n", 2);
     reject_mtl("newmtl a\nKd 0.5 x 0.5\n", 2);
     reject_mtl("newmtl a\nKe 1 nan 1\n", 2);
+    reject_mtl("newmtl a\nKd spectral white.rfl\n", 2);
+}
+
+#[test]
+fn a_single_colour_value_is_grey_and_unused_colours_are_not_read() {
+    // The MTL format's g and b default to r; `Ka`, `Ks` and `Tf` do not enter the model.
+    let scene = load_ok(
+        "grey.obj",
+        &format!("mtllib m.mtl\nusemtl a\n{GOOD}"),
+        Some("newmtl a\nKa 0.5\nKs\nTf spectral glass.rfl\nKd 0.25\nKe 2\n"),
+    );
+    assert_eq!(scene.albedo[0], [0.25; 3]);
+    assert_eq!(scene.emission[0], [2.0; 3]);
 }
 
 #[test]
 fn albedo_out_of_range() {
     reject_mtl("newmtl a\nKd 1.2 0.5 0.5\n", 2);
     reject_mtl("newmtl a\nKd 0.5 -0.1 0.5\n", 2);
-    reject_mtl("# white must be below 1\nnewmtl a\nKd 1 1 1\n", 3);
+}
+
+#[test]
+fn a_white_albedo_of_one_is_lowered_with_a_warning() {
+    // Exporters write white as Kd 1 1 1; the model needs albedo below 1.
+    let dir = tempfile::tempdir().unwrap();
+    write(
+        dir.path(),
+        "scene.mtl",
+        "newmtl grey\nKd 0.5 0.5 0.5\n# white\nnewmtl white\nKd 1 1.0 0.3\n",
+    );
+    let path = write(
+        dir.path(),
+        "room.obj",
+        format!("mtllib scene.mtl\nusemtl white\n{GOOD}"),
+    );
+    let scene = load(&path).unwrap();
+    let max = antiradiance::scene::ALBEDO_MAX;
+    assert!(
+        scene.albedo.iter().all(|&a| a == [max, max, 0.3]),
+        "{:?}",
+        scene.albedo
+    );
+    let lowered: Vec<String> = (scene.warnings.iter())
+        .filter(|w| w.contains("lowered"))
+        .map(|w| w.to_string())
+        .collect();
+    assert_eq!(lowered.len(), 1, "{lowered:?}");
+    assert!(
+        lowered[0].contains("scene.mtl:5:") && lowered[0].contains("'white'"),
+        "{lowered:?}"
+    );
 }
 
 #[test]
@@ -538,7 +580,7 @@ fn cli_malformed_vertex() {
 #[test]
 fn cli_short_kd_does_not_panic() {
     let dir = tempfile::tempdir().unwrap();
-    write(dir.path(), "BAD.mtl", "newmtl a\nKd 0.5\n");
+    write(dir.path(), "BAD.mtl", "newmtl a\nKd 0.5 0.5\n");
     let bad = write(
         dir.path(),
         "BAD.obj",

@@ -5,6 +5,7 @@
 //! or a vertex. All tolerances of the crate live in this module.
 
 pub mod bins;
+pub mod polygon;
 pub mod raytrace;
 pub mod sampling;
 pub mod tolerances;

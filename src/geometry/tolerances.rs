@@ -182,9 +182,11 @@ pub const VARIANT_COLLINEAR: f64 = 1e-12;
 /// region's to this relative amount (float rounding of the sums, far below a missing piece).
 pub const VARIANT_AREA_MATCH: f64 = 1e-9;
 
-/// Mesh variants: ear-clipping's test for a point on an ear's edge, relative to the polygon's
-/// extent squared (twice the signed area of the point's triangle).
-pub const VARIANT_EAR: f64 = 1e-14;
+/// Ear clipping ([`crate::geometry::polygon::ear_clip`], for concave polygons of scene files and
+/// the mesh variants' merged regions): a corner turns, and a point lies off an ear's edge,
+/// when twice the signed area of their triangle is beyond this, relative to the polygon's
+/// extent squared.
+pub const EAR_TOLERANCE: f64 = 1e-14;
 
 /// Mesh variants: two triangles are coplanar for region merging when the far corner of one is
 /// within this fraction of the scene's diameter of the other's plane (the noise of exported

@@ -1,7 +1,9 @@
 //! Stage 1: load an OBJ+MTL or glTF 2.0 scene into a flat list of input triangles with
 //! materials (textures averaged per triangle, [`texture`]) and analytic lights ([`lights`]).
 //!
-//! Polygons are fan-triangulated in file order; a triangle's index is its position in that order,
+//! Polygons are triangulated in file order (convex ones fanned from their first corner, concave
+//! ones ear-clipped: [`crate::geometry::polygon::triangulate`]); a triangle's index is its
+//! position in that order,
 //! and this order is the contract for every per-triangle output. Positions are kept in f64 so that a
 //! scene translated far from the origin keeps its precision. Every line-level problem is reported as
 //! `file:line: message` before tobj ever sees the file (tobj 4.0.5 panics on some malformed lines).
@@ -83,7 +85,8 @@ pub struct Scene {
     pub path: PathBuf,
     /// Vertex positions in the file's units and frame.
     pub positions: Vec<DVec3>,
-    /// Input triangles, indices into `positions`, in file order (polygons fan-triangulated).
+    /// Input triangles, indices into `positions`, in file order (convex polygons fanned from
+    /// their first corner, concave ones ear-clipped: [`crate::geometry::polygon::triangulate`]).
     pub triangles: Vec<[u32; 3]>,
     /// Per-triangle albedo, RGB, each in [0, 1).
     pub albedo: Vec<[f64; 3]>,

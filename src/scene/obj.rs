@@ -14,8 +14,9 @@ use std::path::Path;
 ///
 /// Errors name the file and, where known, the line: missing or unreadable file, empty or binary
 /// file, malformed numbers, NaN or infinite coordinates, face index out of range, colour lines with
-/// fewer than three numbers, albedo outside [0, 1), negative emission, no non-degenerate triangle.
-/// A missing MTL file, a `usemtl` naming a material no MTL file defines, triangles that repeat
+/// fewer than three numbers, albedo outside [0, 1], negative emission, no non-degenerate triangle.
+/// An albedo of 1 (a white `Kd 1 1 1`) is lowered to [`crate::scene::ALBEDO_MAX`] (the model
+/// needs albedo below 1). These, a missing MTL file, a `usemtl` naming a material no MTL file defines, triangles that repeat
 /// an earlier one ([`Scene::duplicates`]) and a scene without emitters are warnings (in
 /// `Scene::warnings`).
 ///
@@ -27,6 +28,8 @@ pub fn load_obj(path: &Path, options: &SceneOptions) -> Result<Scene> {
     options.validate()?;
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     let text = as_text(path, &bytes)?;
+    let joined = join_continued_lines(text);
+    let text = joined.as_deref().unwrap_or(text);
     let obj_scan = scan_obj(path, text)?;
 
     let mut warnings = Vec::new();
@@ -51,6 +54,9 @@ pub fn load_obj(path: &Path, options: &SceneOptions) -> Result<Scene> {
         }
     }
     let default_albedo = [options.default_albedo; 3];
+    let mut polygons = PolygonCounts::default();
+    // For each triangle, its corners' places in the face it was cut from.
+    let mut polygon_corners: Vec<[u32; 3]> = Vec::with_capacity(obj_scan.triangle_count);
     for model in &models {
         let mesh = &model.mesh;
         let base = scene.positions.len() as u32;
@@ -70,13 +76,36 @@ pub fn load_obj(path: &Path, options: &SceneOptions) -> Result<Scene> {
             .and_then(|m| m.emissive)
             .map(|e| [e[0], e[1], e[2]])
             .unwrap_or([0.0; 3]);
-        for tri in mesh.indices.chunks_exact(3) {
-            scene
-                .triangles
-                .push([base + tri[0], base + tri[1], base + tri[2]]);
-            scene.albedo.push(albedo);
-            scene.emission.push(emission);
-            scene.material.push(material_id);
+        // Faces as tobj read them (every face a triangle when `face_arities` is empty),
+        // triangulated here: fans for convex polygons, ear clipping for concave ones.
+        let mut start = 0usize;
+        let arities = mesh.face_arities.iter().map(|&a| a as usize);
+        let triangles_only = std::iter::repeat_n(3, mesh.indices.len() / 3);
+        let faces: Box<dyn Iterator<Item = usize>> = if mesh.face_arities.is_empty() {
+            Box::new(triangles_only)
+        } else {
+            Box::new(arities)
+        };
+        for arity in faces {
+            let Some(face) = mesh.indices.get(start..start + arity) else {
+                break;
+            };
+            start += arity;
+            let corners: Vec<DVec3> = face
+                .iter()
+                .map(|&i| scene.positions[(base + i) as usize])
+                .collect();
+            let (triangles, how) = crate::geometry::polygon::triangulate(&corners);
+            polygons.count(how);
+            for [a, b, c] in triangles {
+                scene
+                    .triangles
+                    .push([base + face[a], base + face[b], base + face[c]]);
+                polygon_corners.push([a as u32, b as u32, c as u32]);
+                scene.albedo.push(albedo);
+                scene.emission.push(emission);
+                scene.material.push(material_id);
+            }
         }
     }
     if scene.triangles.len() != obj_scan.triangle_count {
@@ -90,7 +119,24 @@ pub fn load_obj(path: &Path, options: &SceneOptions) -> Result<Scene> {
         });
     }
 
-    super::texture::apply_obj_textures(&mut scene, path, text, &mut warnings);
+    if polygons.not_simple > 0 {
+        warnings.push(Warning::in_file(
+            WarningKind::Polygon,
+            path,
+            None,
+            format!(
+                "{} concave polygon{} could not be ear-clipped (crossing {}, or more than {} corners) and {} fanned from a corner: {} triangles may cover area outside {}",
+                polygons.not_simple,
+                if polygons.not_simple == 1 { "" } else { "s" },
+                if polygons.not_simple == 1 { "itself" } else { "themselves" },
+                crate::geometry::polygon::MAX_EAR_CLIPPED_CORNERS,
+                if polygons.not_simple == 1 { "was" } else { "were" },
+                if polygons.not_simple == 1 { "its" } else { "their" },
+                if polygons.not_simple == 1 { "it" } else { "them" },
+            ),
+        ));
+    }
+    super::texture::apply_obj_textures(&mut scene, path, text, &polygon_corners, &mut warnings);
     if let Some(y) = options.emit_above {
         for t in 0..scene.len() {
             if scene.corners(t).iter().all(|p| p.y > y) {
@@ -142,6 +188,23 @@ pub fn load_obj(path: &Path, options: &SceneOptions) -> Result<Scene> {
     Ok(scene)
 }
 
+/// How many of a file's polygons were triangulated each way
+/// ([`crate::geometry::polygon::Triangulated`]).
+#[derive(Default)]
+struct PolygonCounts {
+    not_simple: usize,
+}
+
+impl PolygonCounts {
+    fn count(&mut self, how: crate::geometry::polygon::Triangulated) {
+        use crate::geometry::polygon::Triangulated;
+        match how {
+            Triangulated::Fan | Triangulated::EarClipped => {}
+            Triangulated::NotSimple => self.not_simple += 1,
+        }
+    }
+}
+
 /// The material step of [`load_obj`]: every MTL file the OBJ names, checked line by line
 /// first (tobj panics on short colour lines) and reduced to the lines we use (tobj drops a
 /// whole file over one line it cannot parse); missing files and undefined materials become
@@ -162,6 +225,17 @@ fn read_materials(
                 Ok(mtl_bytes) => {
                     let mtl_text = as_text(&mtl_path, &mtl_bytes)?;
                     let mtl_scan = scan_mtl(&mtl_path, mtl_text)?;
+                    for (line, material, kd) in &mtl_scan.lowered {
+                        warnings.push(Warning::in_file(
+                            WarningKind::Albedo,
+                            &mtl_path,
+                            Some(*line),
+                            format!(
+                                "material '{material}': albedo Kd {kd} lowered to {} (the model needs albedo below 1)",
+                                crate::scene::ALBEDO_MAX
+                            ),
+                        ));
+                    }
                     defined.extend(mtl_scan.names);
                     mtl_texts.push(mtl_scan.clean);
                 }
@@ -214,7 +288,9 @@ fn parse_with_tobj(
     clean.push_str(&obj_scan.vertices);
     clean.push_str(&obj_scan.body);
     let load_options = tobj::LoadOptions {
-        triangulate: true,
+        // Polygons are triangulated by `load_obj` (tobj fans them, which is wrong for
+        // concave ones).
+        triangulate: false,
         single_index: false,
         ignore_points: true,
         ignore_lines: true,
@@ -233,6 +309,33 @@ fn parse_with_tobj(
         })?;
     let materials = materials.unwrap_or_default();
     Ok((models, materials))
+}
+
+/// The text with OBJ's continued lines joined (a line ending in `\` goes on in the next
+/// one), or `None` when no line is continued. A joined line keeps the number of its first
+/// line, and the lines it took are left empty after it, so every other line keeps its number.
+pub(crate) fn join_continued_lines(text: &str) -> Option<String> {
+    let continued = |line: &str| line.trim_end_matches(['\r', '\n']).ends_with('\\');
+    if !text.split_inclusive('\n').any(continued) {
+        return None;
+    }
+    let mut out = String::with_capacity(text.len());
+    let mut taken = 0;
+    for line in text.split_inclusive('\n') {
+        let body = line.trim_end_matches(['\r', '\n']);
+        if let Some(head) = body.strip_suffix('\\') {
+            out.push_str(head);
+            out.push(' ');
+            taken += 1;
+        } else {
+            out.push_str(body);
+            for _ in 0..=taken {
+                out.push('\n');
+            }
+            taken = 0;
+        }
+    }
+    Some(out)
 }
 
 /// Rejects binary and non-UTF-8 content with a one-line error.
@@ -561,14 +664,19 @@ pub(crate) struct MtlScan {
     names: Vec<String>,
     /// The file reduced to `newmtl`, `Kd` and `Ke` lines.
     clean: String,
+    /// `Kd` lines with a value of 1, lowered to [`crate::scene::ALBEDO_MAX`]: line, material,
+    /// the values as written.
+    lowered: Vec<(usize, String, String)>,
 }
 
-/// Checks every colour line of an MTL file (tobj 4.0.5 panics on `Kd 0.5`) and the physical
+/// Checks the `Kd` and `Ke` lines of an MTL file (a single value is grey; tobj 4.0.5 panics on
+/// `Kd 0.5`, so it is written out as three) and the physical
 /// ranges, and reduces the file to the lines we use.
 pub(crate) fn scan_mtl(path: &Path, text: &str) -> Result<MtlScan> {
     let mut scan = MtlScan {
         names: Vec::new(),
         clean: String::new(),
+        lowered: Vec::new(),
     };
     for (i, raw) in text.lines().enumerate() {
         let line_no = i + 1;
@@ -584,23 +692,33 @@ pub(crate) fn scan_mtl(path: &Path, text: &str) -> Result<MtlScan> {
             scan.names.push(name.to_string());
             continue;
         }
-        if !matches!(key, "Ka" | "Kd" | "Ks" | "Ke" | "Tf") {
+        // The colours the model uses (tobj sees nothing else: `Ka`, `Ks`, `Tf` and the rest
+        // are dropped unread).
+        if !matches!(key, "Kd" | "Ke") {
             continue;
         }
-        let nums: Vec<&str> = words.collect();
+        let mut nums: Vec<&str> = words.collect();
         if nums.first().is_some_and(|w| w.parse::<f64>().is_err()) {
-            // `Kd spectral file.rfl` / `Ka xyz ...`: a form we do not support.
+            // `Kd spectral file.rfl` / `Kd xyz ...`: a form we do not support.
             return Err(parse_err(
                 path,
                 line_no,
-                format!("{key} must be three numbers (r g b)"),
+                format!("{key} must be numbers (r g b, or one grey value)"),
             ));
+        }
+        // One number is grey (the MTL format's g and b default to r); tobj 4.0.5 panics on
+        // it, so it is written out as three.
+        if nums.len() == 1 {
+            nums = vec![nums[0]; 3];
         }
         if nums.len() < 3 {
             return Err(parse_err(
                 path,
                 line_no,
-                format!("{key} needs three numbers (r g b), found {}", nums.len()),
+                format!(
+                    "{key} needs three numbers (r g b) or one (grey), found {}",
+                    nums.len()
+                ),
             ));
         }
         let mut values = [0.0f64; 3];
@@ -617,15 +735,27 @@ pub(crate) fn scan_mtl(path: &Path, text: &str) -> Result<MtlScan> {
             }
             values[k] = x;
         }
-        if key == "Kd" && values.iter().any(|&x| !(0.0..1.0).contains(&x)) {
+        if key == "Kd" && values.iter().any(|&x| !(0.0..=1.0).contains(&x)) {
             return Err(parse_err(
                 path,
                 line_no,
                 format!(
-                    "albedo Kd {} {} {} is outside [0, 1)",
+                    "albedo Kd {} {} {} is outside [0, 1]",
                     values[0], values[1], values[2]
                 ),
             ));
+        }
+        let max = crate::scene::ALBEDO_MAX;
+        if key == "Kd" && values.contains(&1.0) {
+            let material = scan.names.last().cloned().unwrap_or_default();
+            scan.lowered.push((
+                line_no,
+                material,
+                format!("{} {} {}", nums[0], nums[1], nums[2]),
+            ));
+            let [r, g, b] = values.map(|x| x.min(max));
+            scan.clean.push_str(&format!("Kd {r} {g} {b}\n"));
+            continue;
         }
         if key == "Ke" && values.iter().any(|&x| x < 0.0) {
             return Err(parse_err(
@@ -671,6 +801,16 @@ mod tests {
         whole
             .map(|s| (s.vertices, s.body, s.triangle_count))
             .map_err(|e| e.to_string())
+    }
+
+    #[test]
+    fn continued_lines_are_joined_and_later_lines_keep_their_numbers() {
+        assert_eq!(join_continued_lines("v 0 0 0\nf 1 2 3\n"), None);
+        let joined = join_continued_lines("v 0 0 0\r\nf 1 \\\r\n 2 \\\n3\nbad\n").unwrap();
+        assert_eq!(joined, "v 0 0 0\nf 1   2  3\n\n\nbad\n");
+        assert_eq!(joined.lines().position(|l| l == "bad"), Some(4));
+        // A continuation on the last line ends the text.
+        assert_eq!(join_continued_lines("f 1 2 \\").unwrap(), "f 1 2  ");
     }
 
     #[test]

@@ -547,9 +547,10 @@ fn obj_material_textures(obj_path: &Path, obj_text: &str) -> HashMap<String, Mtl
 }
 
 /// The texture coordinates of every triangle of an OBJ file, in the loader's order (faces in
-/// file order, fan-triangulated as (0, i, i + 1)); `None` for a triangle whose corners do not
+/// file order, each cut into the triangles `polygon_corners` gives: for each triangle, its
+/// corners' places in its face); `None` for a triangle whose corners do not
 /// all have a `vt` reference in range. `v` is flipped (OBJ's `v` runs up the image).
-fn obj_triangle_uvs(obj_text: &str) -> Vec<Option<[[f64; 2]; 3]>> {
+fn obj_triangle_uvs(obj_text: &str, polygon_corners: &[[u32; 3]]) -> Vec<Option<[[f64; 2]; 3]>> {
     let mut vts: Vec<[f64; 2]> = Vec::new();
     let mut out = Vec::new();
     for raw in obj_text.lines() {
@@ -574,8 +575,13 @@ fn obj_triangle_uvs(obj_text: &str) -> Vec<Option<[[f64; 2]; 3]>> {
                         (0..vts.len() as i64).contains(&k).then(|| vts[k as usize])
                     })
                     .collect();
+                // The face's triangles as the loader cut them (their corners' places in the
+                // face); past the loader's list (a count that differs), a fan.
                 for i in 1..corners.len().saturating_sub(1) {
-                    out.push(match (corners[0], corners[i], corners[i + 1]) {
+                    let fan = [0, i as u32, i as u32 + 1];
+                    let [a, b, c] = polygon_corners.get(out.len()).copied().unwrap_or(fan);
+                    let at = |k: u32| corners.get(k as usize).copied().flatten();
+                    out.push(match (at(a), at(b), at(c)) {
                         (Some(a), Some(b), Some(c)) => Some([a, b, c]),
                         _ => None,
                     });
@@ -598,6 +604,7 @@ pub(crate) fn apply_obj_textures(
     scene: &mut crate::scene::Scene,
     obj_path: &Path,
     obj_text: &str,
+    polygon_corners: &[[u32; 3]],
     warnings: &mut Vec<Warning>,
 ) {
     let materials = obj_material_textures(obj_path, obj_text);
@@ -607,7 +614,7 @@ pub(crate) fn apply_obj_textures(
     {
         return;
     }
-    let uvs = obj_triangle_uvs(obj_text);
+    let uvs = obj_triangle_uvs(obj_text, polygon_corners);
     if uvs.len() != scene.len() {
         warnings.push(Warning::in_file(
             WarningKind::Texture,

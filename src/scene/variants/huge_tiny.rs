@@ -8,8 +8,7 @@ use glam::{DVec2, DVec3};
 use std::collections::HashMap;
 
 use crate::geometry::tolerances::{
-    VARIANT_AREA_MATCH, VARIANT_COLLINEAR, VARIANT_EAR, VARIANT_OVERLAP, VARIANT_PLANE,
-    VARIANT_SAME_NORMAL,
+    VARIANT_AREA_MATCH, VARIANT_COLLINEAR, VARIANT_OVERLAP, VARIANT_PLANE, VARIANT_SAME_NORMAL,
 };
 use crate::union_find::UnionFind;
 
@@ -123,7 +122,7 @@ pub(super) fn merge_region(scene: &Scene, region: &[usize], frame: &PlaneFrame) 
         }
     }
     let flat: Vec<DVec2> = points.iter().map(|&p| frame.flat(p)).collect();
-    let ears = ear_clip(&flat)?;
+    let ears = crate::geometry::polygon::ear_clip(&flat)?;
     let merged = Merged {
         tris: ears.iter().map(|e| e.map(|i| points[i])).collect(),
         flat: ears.iter().map(|e| e.map(|i| flat[i])).collect(),
@@ -136,47 +135,6 @@ pub(super) fn merge_region(scene: &Scene, region: &[usize], frame: &PlaneFrame) 
     let all_positive = merged.flat.iter().all(|t| flat_area(t) > 0.0);
     (all_positive && (merged_area - region_area).abs() <= VARIANT_AREA_MATCH * region_area)
         .then_some(merged)
-}
-
-/// Ear clipping of a simple polygon given counter-clockwise; triangles as index triples.
-pub(super) fn ear_clip(p: &[DVec2]) -> Option<Vec<[usize; 3]>> {
-    let area2: f64 = (0..p.len())
-        .map(|i| p[i].perp_dot(p[(i + 1) % p.len()]))
-        .sum();
-    if !(area2 > 0.0) {
-        return None;
-    }
-    let scale = p.iter().fold(0.0f64, |m, q| m.max(q.length()));
-    let eps = VARIANT_EAR * scale * scale;
-    let cross = |a: DVec2, b: DVec2, c: DVec2| (b - a).perp_dot(c - a);
-    let mut idx: Vec<usize> = (0..p.len()).collect();
-    let mut out = Vec::with_capacity(p.len().saturating_sub(2));
-    let mut from = 0;
-    while idx.len() > 3 {
-        let m = idx.len();
-        let ear = (0..m).map(|step| (from + step) % m).find(|&j| {
-            let (a, b, c) = (idx[(j + m - 1) % m], idx[j], idx[(j + 1) % m]);
-            if cross(p[a], p[b], p[c]) <= eps {
-                return false;
-            }
-            idx.iter().all(|&q| {
-                q == a
-                    || q == b
-                    || q == c
-                    || p[q] == p[a]
-                    || p[q] == p[b]
-                    || p[q] == p[c]
-                    || cross(p[a], p[b], p[q]) < -eps
-                    || cross(p[b], p[c], p[q]) < -eps
-                    || cross(p[c], p[a], p[q]) < -eps
-            })
-        })?;
-        out.push([idx[(ear + m - 1) % m], idx[ear], idx[(ear + 1) % m]]);
-        idx.remove(ear);
-        from = ear % idx.len();
-    }
-    out.push([idx[0], idx[1], idx[2]]);
-    Some(out)
 }
 
 /// Area of the intersection of two counter-clockwise 2D triangles (Sutherland-Hodgman).
