@@ -101,6 +101,8 @@ pub enum WarningKind {
     /// A polygon could not be triangulated within its outline (it crosses itself) and was
     /// fanned.
     Polygon,
+    /// A scene file is not UTF-8 and was read as Latin-1.
+    Encoding,
 }
 
 /// A finding that does not stop the work (a missing material, a solve that hit its iteration

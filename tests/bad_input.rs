@@ -109,9 +109,37 @@ fn binary_file() {
         .collect();
     let path = write(dir.path(), "noise.obj", &bytes);
     assert_error(load(&path), "noise.obj", None);
-    // Invalid UTF-8 without NULs is rejected too, with the line.
-    let path = write(dir.path(), "latin1.obj", b"v 0 0 0\nv 1 0 0\n# caf\xe9\n");
-    assert_error(load(&path), "latin1.obj", Some(3));
+}
+
+#[test]
+fn a_latin1_file_is_read_with_a_warning() {
+    // Not UTF-8 but no NUL: names and comments in Latin-1, as some exporters write them; the
+    // material name matches between the OBJ and the MTL file.
+    let dir = tempfile::tempdir().unwrap();
+    write(
+        dir.path(),
+        "m.mtl",
+        b"# caf\xe9\nnewmtl b\xfcro\nKd 0.25 0.5 0.125\n",
+    );
+    let path = write(
+        dir.path(),
+        "latin1.obj",
+        [
+            b"mtllib m.mtl\n# caf\xe9\nusemtl b\xfcro\n".as_slice(),
+            GOOD.as_bytes(),
+        ]
+        .concat(),
+    );
+    let scene = load(&path).unwrap();
+    assert_eq!(scene.albedo[0], [0.25, 0.5, 0.125]);
+    assert_eq!(scene.material_name(0), Some("b\u{fc}ro"));
+    let encoding: Vec<String> = (scene.warnings.iter())
+        .filter(|w| w.contains("Latin-1"))
+        .map(|w| w.to_string())
+        .collect();
+    assert_eq!(encoding.len(), 2, "{encoding:?}");
+    assert!(encoding[0].contains("latin1.obj:2:"), "{encoding:?}");
+    assert!(encoding[1].contains("m.mtl:1:"), "{encoding:?}");
 }
 
 // ---- malformed OBJ lines ---------------------------------------------------------------------

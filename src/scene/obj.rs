@@ -27,12 +27,12 @@ use std::path::Path;
 pub fn load_obj(path: &Path, options: &SceneOptions) -> Result<Scene> {
     options.validate()?;
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let text = as_text(path, &bytes)?;
-    let joined = join_continued_lines(text);
-    let text = joined.as_deref().unwrap_or(text);
+    let mut warnings = Vec::new();
+    let text = as_text(path, &bytes, &mut warnings)?;
+    let joined = join_continued_lines(&text);
+    let text = joined.as_deref().unwrap_or(&text);
     let obj_scan = scan_obj(path, text)?;
 
-    let mut warnings = Vec::new();
     let mtl_texts = read_materials(path, &obj_scan, &mut warnings)?;
     let (models, materials) = parse_with_tobj(path, &obj_scan, &mtl_texts)?;
 
@@ -223,8 +223,8 @@ fn read_materials(
             let mtl_path = base_dir.join(name);
             match std::fs::read(&mtl_path) {
                 Ok(mtl_bytes) => {
-                    let mtl_text = as_text(&mtl_path, &mtl_bytes)?;
-                    let mtl_scan = scan_mtl(&mtl_path, mtl_text)?;
+                    let mtl_text = as_text(&mtl_path, &mtl_bytes, warnings)?;
+                    let mtl_scan = scan_mtl(&mtl_path, &mtl_text)?;
                     for (line, material, kd) in &mtl_scan.lowered {
                         warnings.push(Warning::in_file(
                             WarningKind::Albedo,
@@ -338,27 +338,42 @@ pub(crate) fn join_continued_lines(text: &str) -> Option<String> {
     Some(out)
 }
 
-/// Rejects binary and non-UTF-8 content with a one-line error.
-pub(crate) fn as_text<'a>(path: &Path, bytes: &'a [u8]) -> Result<&'a str> {
+/// The text of a scene file: UTF-8 (a byte-order mark dropped), or, when it is not valid
+/// UTF-8, every byte read as the Latin-1 character of that code (some exporters write names
+/// and comments in Latin-1), with a warning naming the first line that is not UTF-8. Binary
+/// content (a NUL byte) is a one-line error.
+pub(crate) fn as_text<'a>(
+    path: &Path,
+    bytes: &'a [u8],
+    warnings: &mut Vec<Warning>,
+) -> Result<std::borrow::Cow<'a, str>> {
     if bytes.contains(&0) {
         return Err(Error::Scene {
             path: path.to_path_buf(),
             message: "binary file (contains NUL bytes), expected text".into(),
         });
     }
-    let text = std::str::from_utf8(bytes).map_err(|e| {
-        let line = bytes[..e.valid_up_to()]
-            .iter()
-            .filter(|&&b| b == b'\n')
-            .count()
-            + 1;
-        Error::Parse {
-            path: path.to_path_buf(),
-            line,
-            message: "not valid UTF-8 text (binary file?)".into(),
+    match std::str::from_utf8(bytes) {
+        Ok(text) => Ok(text.strip_prefix('\u{feff}').unwrap_or(text).into()),
+        Err(e) => {
+            let line = bytes[..e.valid_up_to()]
+                .iter()
+                .filter(|&&b| b == b'\n')
+                .count()
+                + 1;
+            warnings.push(Warning::in_file(
+                WarningKind::Encoding,
+                path,
+                Some(line),
+                "not UTF-8 text: the file is read as Latin-1",
+            ));
+            Ok(bytes
+                .iter()
+                .map(|&b| char::from(b))
+                .collect::<String>()
+                .into())
         }
-    })?;
-    Ok(text.strip_prefix('\u{feff}').unwrap_or(text))
+    }
 }
 
 /// What the line-level scan of an OBJ file learned.

@@ -502,8 +502,12 @@ fn obj_material_textures(obj_path: &Path, obj_text: &str) -> HashMap<String, Mtl
     for argument in obj_text.lines().filter_map(mtllib::argument) {
         for name in mtllib::names(base, argument) {
             let mtl_path = base.join(name);
-            let Ok(text) = std::fs::read_to_string(&mtl_path) else {
-                continue; // the scene loader already warned
+            // Read as the scene loader read it (which warned of what it could not read).
+            let Ok(bytes) = std::fs::read(&mtl_path) else {
+                continue;
+            };
+            let Ok(text) = crate::scene::obj::as_text(&mtl_path, &bytes, &mut Vec::new()) else {
+                continue;
             };
             let dir = mtl_path.parent().unwrap_or(Path::new(".")).to_path_buf();
             let mut current: Option<String> = None;
