@@ -114,7 +114,7 @@ fn sum_over_lights(
     if lights.is_empty() {
         return total;
     }
-    let rays = RayScene::new(&patches.corners, &patches.active);
+    let rays = RayScene::of(patches);
     for (k, light) in lights.iter().enumerate() {
         add_into(&mut total, per_light(&rays, light, k));
     }

@@ -92,6 +92,9 @@ pub struct Patches {
     /// `source`; 0 for one-sided patches). Empty when there is no analytic light or no
     /// two-sided patch.
     pub source_back: Vec<[f64; 3]>,
+    /// The ray BVH of these patches, once a ray scene was made of them
+    /// ([`crate::geometry::raytrace::RayScene::of`]); clones share it.
+    pub ray_cache: crate::geometry::raytrace::RayCache,
 }
 
 impl Patches {

@@ -179,7 +179,7 @@ impl<'a> Tracer<'a> {
         }
         Tracer {
             patches,
-            rays: RayScene::new(&patches.corners, &patches.active),
+            rays: RayScene::of(patches),
             emitters,
             cdf,
             light_density,

@@ -94,7 +94,7 @@ impl Cavities {
         if emitters.is_empty() {
             return None;
         }
-        let scene = RayScene::new(&patches.corners, &patches.active);
+        let scene = RayScene::of(patches);
         let trapped: Vec<Trapped> = emitters
             .par_iter()
             .filter_map(|&p| {

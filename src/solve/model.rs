@@ -78,7 +78,7 @@ const BEHIND_NOTHING: f64 = 1e-12;
 /// surfaces (`two_sided_exposed`).
 pub fn exposed_backs(patches: &Patches) -> Vec<bool> {
     let twinned = back_to_back_twins(patches);
-    let scene = RayScene::new(&patches.corners, &patches.active);
+    let scene = RayScene::of(patches);
     // The box of every active patch: a patch with all of it on or in front of its plane has
     // nothing behind it for a back ray to meet (the walls of a room shell, of the 1M-triangle
     // box 90% of its patches and 4M rays).

@@ -239,7 +239,7 @@ impl<'a> DirectLight<'a> {
             patches,
             groups: group_emitters(&emitters),
             emitters,
-            rays: RayScene::new(&patches.corners, &patches.active),
+            rays: RayScene::of(patches),
             samples: 0,
         };
         light.samples = shadow_samples(receivers);

@@ -60,7 +60,7 @@ impl Relighter {
             return 0.0;
         }
         let start = Instant::now();
-        let rays = RayScene::new(&self.patches.corners, &self.patches.active);
+        let rays = RayScene::of(&self.patches);
         // Per face of the solver, as the cold solve's exact direct light gives them
         // (`mesh::lights::faces_source`).
         let faces: Vec<_> = self
