@@ -254,6 +254,25 @@ fn albedo_out_of_range() {
 }
 
 #[test]
+fn a_transparent_material_is_opaque_with_a_warning() {
+    let scene = load_ok(
+        "glass.obj",
+        &format!("mtllib m.mtl\nusemtl glass\n{GOOD}"),
+        Some("newmtl wall\nd 1.0\nKd 0.5 0.5 0.5\nnewmtl glass\nKd 0.1 0.1 0.1\nd 0.25\n"),
+    );
+    assert_eq!(scene.albedo[0], [0.1; 3]);
+    let transparent: Vec<String> = (scene.warnings.iter())
+        .filter(|w| w.contains("transparency"))
+        .map(|w| w.to_string())
+        .collect();
+    assert_eq!(transparent.len(), 1, "{transparent:?}");
+    assert!(
+        transparent[0].contains("m.mtl:6:") && transparent[0].contains("'glass'"),
+        "{transparent:?}"
+    );
+}
+
+#[test]
 fn a_white_albedo_of_one_is_lowered_with_a_warning() {
     // Exporters write white as Kd 1 1 1; the model needs albedo below 1.
     let dir = tempfile::tempdir().unwrap();

@@ -236,6 +236,16 @@ fn read_materials(
                             ),
                         ));
                     }
+                    for (line, material, d) in &mtl_scan.transparent {
+                        warnings.push(Warning::in_file(
+                            WarningKind::Unsupported,
+                            &mtl_path,
+                            Some(*line),
+                            format!(
+                                "material '{material}': transparency (d {d}) is not modelled; the surface is opaque"
+                            ),
+                        ));
+                    }
                     defined.extend(mtl_scan.names);
                     mtl_texts.push(mtl_scan.clean);
                 }
@@ -682,6 +692,8 @@ pub(crate) struct MtlScan {
     /// `Kd` lines with a value of 1, lowered to [`crate::scene::ALBEDO_MAX`]: line, material,
     /// the values as written.
     lowered: Vec<(usize, String, String)>,
+    /// `d` lines below 1 (transparent materials, not modelled): line, material, dissolve.
+    transparent: Vec<(usize, String, f64)>,
 }
 
 /// Checks the `Kd` and `Ke` lines of an MTL file (a single value is grey; tobj 4.0.5 panics on
@@ -692,6 +704,7 @@ pub(crate) fn scan_mtl(path: &Path, text: &str) -> Result<MtlScan> {
         names: Vec::new(),
         clean: String::new(),
         lowered: Vec::new(),
+        transparent: Vec::new(),
     };
     for (i, raw) in text.lines().enumerate() {
         let line_no = i + 1;
@@ -705,6 +718,15 @@ pub(crate) fn scan_mtl(path: &Path, text: &str) -> Result<MtlScan> {
             }
             scan.clean.push_str(&format!("newmtl {name}\n"));
             scan.names.push(name.to_string());
+            continue;
+        }
+        // Dissolve below 1: a transparent surface, which the model takes as opaque.
+        if key == "d" {
+            let dissolve = words.next().and_then(|w| w.parse::<f64>().ok());
+            if let Some(d) = dissolve.filter(|d| (0.0..1.0).contains(d)) {
+                let material = scan.names.last().cloned().unwrap_or_default();
+                scan.transparent.push((line_no, material, d));
+            }
             continue;
         }
         // The colours the model uses (tobj sees nothing else: `Ka`, `Ks`, `Tf` and the rest
