@@ -260,11 +260,16 @@ mod tests {
             (2.0, 3.0),
             (0.0, 3.0),
         ]);
-        let (tris, how) = triangulate(&wall);
+        assert_ear_clipped_to(&wall, 11.0);
+    }
+
+    /// Asserts that `polygon` is ear-clipped into `n - 2` triangles of total area `expected`.
+    fn assert_ear_clipped_to(polygon: &[DVec3], expected: f64) {
+        let (tris, how) = triangulate(polygon);
         assert_eq!(how, Triangulated::EarClipped);
-        assert_eq!(tris.len(), wall.len() - 2);
-        let (a, _) = area(&wall, &tris);
-        assert!((a - 11.0).abs() < 1e-9, "area {a}");
+        assert_eq!(tris.len(), polygon.len() - 2);
+        let (a, _) = area(polygon, &tris);
+        assert!((a - expected).abs() < 1e-9, "area {a}, expected {expected}");
     }
 
     #[test]
@@ -276,12 +281,7 @@ mod tests {
             points.extend([(x + 2.0, 1.0), (x + 1.0, 1.0), (x + 1.0, 3.0), (x, 3.0)]);
         }
         points.dedup();
-        let comb = xy(&points);
-        let (tris, how) = triangulate(&comb);
-        assert_eq!(how, Triangulated::EarClipped);
-        assert_eq!(tris.len(), comb.len() - 2);
-        let (a, _) = area(&comb, &tris);
-        assert!((a - 200.0).abs() < 1e-9, "area {a}");
+        assert_ear_clipped_to(&xy(&points), 200.0);
     }
 
     #[test]

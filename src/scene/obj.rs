@@ -225,27 +225,7 @@ fn read_materials(
                 Ok(mtl_bytes) => {
                     let mtl_text = as_text(&mtl_path, &mtl_bytes, warnings)?;
                     let mtl_scan = scan_mtl(&mtl_path, &mtl_text)?;
-                    for (line, material, kd) in &mtl_scan.lowered {
-                        warnings.push(Warning::in_file(
-                            WarningKind::Albedo,
-                            &mtl_path,
-                            Some(*line),
-                            format!(
-                                "material '{material}': albedo Kd {kd} lowered to {} (the model needs albedo below 1)",
-                                crate::scene::ALBEDO_MAX
-                            ),
-                        ));
-                    }
-                    for (line, material, d) in &mtl_scan.transparent {
-                        warnings.push(Warning::in_file(
-                            WarningKind::Unsupported,
-                            &mtl_path,
-                            Some(*line),
-                            format!(
-                                "material '{material}': transparency (d {d}) is not modelled; the surface is opaque"
-                            ),
-                        ));
-                    }
+                    warnings.extend(mtl_scan.warnings);
                     defined.extend(mtl_scan.names);
                     mtl_texts.push(mtl_scan.clean);
                 }
@@ -689,11 +669,9 @@ pub(crate) struct MtlScan {
     names: Vec<String>,
     /// The file reduced to `newmtl`, `Kd` and `Ke` lines.
     clean: String,
-    /// `Kd` lines with a value of 1, lowered to [`crate::scene::ALBEDO_MAX`]: line, material,
-    /// the values as written.
-    lowered: Vec<(usize, String, String)>,
-    /// `d` lines below 1 (transparent materials, not modelled): line, material, dissolve.
-    transparent: Vec<(usize, String, f64)>,
+    /// What was read but changed or left out: a `Kd` of 1 lowered to
+    /// [`crate::scene::ALBEDO_MAX`], a transparent material (`d` below 1) taken as opaque.
+    warnings: Vec<Warning>,
 }
 
 /// Checks the `Kd` and `Ke` lines of an MTL file (a single value is grey; tobj 4.0.5 panics on
@@ -703,8 +681,7 @@ pub(crate) fn scan_mtl(path: &Path, text: &str) -> Result<MtlScan> {
     let mut scan = MtlScan {
         names: Vec::new(),
         clean: String::new(),
-        lowered: Vec::new(),
-        transparent: Vec::new(),
+        warnings: Vec::new(),
     };
     for (i, raw) in text.lines().enumerate() {
         let line_no = i + 1;
@@ -724,8 +701,13 @@ pub(crate) fn scan_mtl(path: &Path, text: &str) -> Result<MtlScan> {
         if key == "d" {
             let dissolve = words.next().and_then(|w| w.parse::<f64>().ok());
             if let Some(d) = dissolve.filter(|d| (0.0..1.0).contains(d)) {
-                let material = scan.names.last().cloned().unwrap_or_default();
-                scan.transparent.push((line_no, material, d));
+                let material = scan.names.last().map_or("", String::as_str);
+                scan.warnings.push(Warning::in_file(
+                    WarningKind::Unsupported,
+                    path,
+                    Some(line_no),
+                    format!("material '{material}': transparency (d {d}) is not modelled; the surface is opaque"),
+                ));
             }
             continue;
         }
@@ -784,11 +766,15 @@ pub(crate) fn scan_mtl(path: &Path, text: &str) -> Result<MtlScan> {
         }
         let max = crate::scene::ALBEDO_MAX;
         if key == "Kd" && values.contains(&1.0) {
-            let material = scan.names.last().cloned().unwrap_or_default();
-            scan.lowered.push((
-                line_no,
-                material,
-                format!("{} {} {}", nums[0], nums[1], nums[2]),
+            let material = scan.names.last().map_or("", String::as_str);
+            scan.warnings.push(Warning::in_file(
+                WarningKind::Albedo,
+                path,
+                Some(line_no),
+                format!(
+                    "material '{material}': albedo Kd {} {} {} lowered to {max} (the model needs albedo below 1)",
+                    nums[0], nums[1], nums[2]
+                ),
             ));
             let [r, g, b] = values.map(|x| x.min(max));
             scan.clean.push_str(&format!("Kd {r} {g} {b}\n"));
