@@ -205,7 +205,7 @@ fn a_concave_polygon_too_large_to_clip_is_fanned_with_a_warning() {
     assert_eq!(scene.len(), n - 2);
     let warning = scene.warnings.iter().find(|w| w.contains("ear-clipped"));
     assert!(
-        warning.is_some_and(|w| w.contains("star.obj") && w.contains("1 concave polygon")),
+        warning.is_some_and(|w| w.contains("star.obj") && w.contains("corners): 1, fanned")),
         "{:?}",
         scene.warnings
     );

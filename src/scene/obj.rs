@@ -15,10 +15,12 @@ use std::path::Path;
 /// Errors name the file and, where known, the line: missing or unreadable file, empty or binary
 /// file, malformed numbers, NaN or infinite coordinates, face index out of range, colour lines with
 /// fewer than three numbers, albedo outside [0, 1], negative emission, no non-degenerate triangle.
-/// An albedo of 1 (a white `Kd 1 1 1`) is lowered to [`crate::scene::ALBEDO_MAX`] (the model
-/// needs albedo below 1). These, a missing MTL file, a `usemtl` naming a material no MTL file defines, triangles that repeat
-/// an earlier one ([`Scene::duplicates`]) and a scene without emitters are warnings (in
-/// `Scene::warnings`).
+/// These are warnings (in `Scene::warnings`): an albedo of 1 (a white `Kd 1 1 1`, lowered to
+/// [`crate::scene::ALBEDO_MAX`]: the model needs albedo below 1), a transparent material (`d`
+/// below 1, taken as opaque), a file that is not UTF-8 (read as Latin-1), a concave polygon
+/// that cannot be ear-clipped (fanned), a missing MTL file, a `usemtl` naming a material no MTL
+/// file defines, triangles that repeat an earlier one ([`Scene::duplicates`]) and a scene
+/// without emitters.
 ///
 /// Only what the model uses is read: vertex positions (`v x y z`, optionally `w`, vertex colours
 /// ignored), faces (position indices; texture and normal references are ignored), `mtllib`,
@@ -54,7 +56,7 @@ pub fn load_obj(path: &Path, options: &SceneOptions) -> Result<Scene> {
         }
     }
     let default_albedo = [options.default_albedo; 3];
-    let mut polygons = PolygonCounts::default();
+    let mut not_simple = 0usize;
     // For each triangle, its corners' places in the face it was cut from.
     let mut polygon_corners: Vec<[u32; 3]> = Vec::with_capacity(obj_scan.triangle_count);
     for model in &models {
@@ -96,7 +98,7 @@ pub fn load_obj(path: &Path, options: &SceneOptions) -> Result<Scene> {
                 .map(|&i| scene.positions[(base + i) as usize])
                 .collect();
             let (triangles, how) = crate::geometry::polygon::triangulate(&corners);
-            polygons.count(how);
+            not_simple += usize::from(how == crate::geometry::polygon::Triangulated::NotSimple);
             for [a, b, c] in triangles {
                 scene
                     .triangles
@@ -119,20 +121,14 @@ pub fn load_obj(path: &Path, options: &SceneOptions) -> Result<Scene> {
         });
     }
 
-    if polygons.not_simple > 0 {
+    if not_simple > 0 {
         warnings.push(Warning::in_file(
             WarningKind::Polygon,
             path,
             None,
             format!(
-                "{} concave polygon{} could not be ear-clipped (crossing {}, or more than {} corners) and {} fanned from a corner: {} triangles may cover area outside {}",
-                polygons.not_simple,
-                if polygons.not_simple == 1 { "" } else { "s" },
-                if polygons.not_simple == 1 { "itself" } else { "themselves" },
+                "concave polygons that could not be ear-clipped (crossing themselves, or more than {} corners): {not_simple}, fanned from their first corner; their triangles may cover area outside them",
                 crate::geometry::polygon::MAX_EAR_CLIPPED_CORNERS,
-                if polygons.not_simple == 1 { "was" } else { "were" },
-                if polygons.not_simple == 1 { "its" } else { "their" },
-                if polygons.not_simple == 1 { "it" } else { "them" },
             ),
         ));
     }
@@ -186,23 +182,6 @@ pub fn load_obj(path: &Path, options: &SceneOptions) -> Result<Scene> {
     }
     scene.warnings = warnings;
     Ok(scene)
-}
-
-/// How many of a file's polygons were triangulated each way
-/// ([`crate::geometry::polygon::Triangulated`]).
-#[derive(Default)]
-struct PolygonCounts {
-    not_simple: usize,
-}
-
-impl PolygonCounts {
-    fn count(&mut self, how: crate::geometry::polygon::Triangulated) {
-        use crate::geometry::polygon::Triangulated;
-        match how {
-            Triangulated::Fan | Triangulated::EarClipped => {}
-            Triangulated::NotSimple => self.not_simple += 1,
-        }
-    }
 }
 
 /// The material step of [`load_obj`]: every MTL file the OBJ names, checked line by line
