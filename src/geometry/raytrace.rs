@@ -138,6 +138,19 @@ fn padded_box(tri: &Tri) -> PaddedBox {
     }
 }
 
+/// How far behind a ray's origin (unit frame) the BVH traversal starts it. obvhs 0.4's box
+/// test culls every box the ray leaves within 1e-4 of its origin (`cwbvh::node::EPSILON`), so
+/// a surface nearer than that (0.7 mm in a 7 m office: a mat on a floor, the coplanar twin of
+/// a wall behind a back ray's origin) was never tested, and rays passed through it. Started this far back, every box within reach of the origin is
+/// tested; the f64 test still takes hits from the true origin only (`RAY_EPS < t`).
+const BVH_ORIGIN_BACK: f64 = 2e-4;
+
+/// The origin the BVH traversal starts `org + t dir` (unit `dir`) from: [`BVH_ORIGIN_BACK`]
+/// behind it, so its distances are the ray's plus `BVH_ORIGIN_BACK`.
+fn bvh_origin(org: DVec3, dir: DVec3) -> glam::Vec3A {
+    (org - dir * BVH_ORIGIN_BACK).as_vec3a()
+}
+
 /// An f32 distance bound at least as large as the f64 distance `t`, for BVH culling.
 fn conservative_f32(t: f64) -> f32 {
     (t * (1.0 + RAY_T_SLACK) + RAY_T_SLACK) as f32
@@ -269,7 +282,7 @@ impl<'a> RayScene<'a> {
     pub fn closest(&self, org: DVec3, dir: DVec3, skip: usize) -> Option<Hit> {
         let bvh = self.bvh.bvh.as_ref()?;
         let wt = WatertightRay::new(org, dir);
-        let ray = Ray::new(org.as_vec3a(), dir.as_vec3a(), 0.0, f32::INFINITY);
+        let ray = Ray::new(bvh_origin(org, dir), dir.as_vec3a(), 0.0, f32::INFINITY);
         let mut best: Option<(usize, TriHit)> = None;
         let mut best_t = f64::INFINITY;
         let mut ray_hit = RayHit::none();
@@ -282,7 +295,7 @@ impl<'a> RayScene<'a> {
                 Some(h) => {
                     best_t = h.t;
                     best = Some((patch, h));
-                    conservative_f32(h.t)
+                    conservative_f32(h.t + BVH_ORIGIN_BACK)
                 }
                 None => f32::INFINITY,
             }
@@ -308,7 +321,12 @@ impl<'a> RayScene<'a> {
             return true;
         }
         let wt = WatertightRay::new(org, dir);
-        let ray = Ray::new(org.as_vec3a(), dir.as_vec3a(), 0.0, conservative_f32(t_max));
+        let ray = Ray::new(
+            bvh_origin(org, dir),
+            dir.as_vec3a(),
+            0.0,
+            conservative_f32(t_max + BVH_ORIGIN_BACK),
+        );
         bvh.ray_traverse_miss(ray, |_, slot| {
             let patch = self.bvh.slot_patch[slot] as usize;
             if patch == skip_a || patch == skip_b {
@@ -326,6 +344,51 @@ impl<'a> RayScene<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_surface_just_in_front_of_a_ray_origin_is_hit() {
+        // A unit square at z = 0 and a parallel one at z = g, g down to 1e-6 of the scene
+        // (well under obvhs' box-test epsilon of 1e-4): rays from just above the first square
+        // (its own patches skipped) must meet the second, in closest-hit and shadow tests
+        // alike, at any angle.
+        let (a, b, c, d) = (DVec3::ZERO, DVec3::X, DVec3::new(1.0, 1.0, 0.0), DVec3::Y);
+        for g in [1e-3, 1e-4, 3e-5, 1e-6] {
+            let up = DVec3::Z * g;
+            let corners = vec![
+                [a, b, c],
+                [a, c, d],
+                [a + up, c + up, b + up],
+                [a + up, d + up, c + up],
+            ];
+            let scene = RayScene::new(&corners, &[true; 4]);
+            let mut rng = crate::geometry::sampling::Rng::new(3, 0);
+            for _ in 0..500 {
+                let x = DVec3::new(
+                    0.05 + 0.9 * rng.next_f64(),
+                    0.05 + 0.9 * rng.next_f64(),
+                    0.0,
+                );
+                let dir = DVec3::new(rng.next_f64() - 0.5, rng.next_f64() - 0.5, 1.0).normalize();
+                let hit = scene.closest(x, dir, 0);
+                let through = x + dir * (g / dir.z);
+                let inside = through.x > 1e-9
+                    && through.x < 1.0 - 1e-9
+                    && through.y > 1e-9
+                    && through.y < 1.0 - 1e-9;
+                if !inside {
+                    continue;
+                }
+                assert!(
+                    hit.is_some_and(|h| h.patch >= 2),
+                    "gap {g}: missed from {x:?} along {dir:?}"
+                );
+                assert!(
+                    !scene.visible(x, dir, 2.0 * g / dir.z, 0, 1),
+                    "gap {g}: seen through"
+                );
+            }
+        }
+    }
 
     #[test]
     fn ray_scenes_of_the_same_patches_share_one_bvh_until_a_box_changes() {
