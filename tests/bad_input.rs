@@ -59,6 +59,14 @@ fn reject_mtl(mtl: &str, line: usize) -> String {
     assert_error(load(&path), "scene.mtl", Some(line))
 }
 
+/// The scene's warnings that contain `text`, as `file:line: message` lines.
+fn warnings_containing(scene: &Scene, text: &str) -> Vec<String> {
+    (scene.warnings.iter())
+        .filter(|w| w.contains(text))
+        .map(|w| w.to_string())
+        .collect()
+}
+
 fn load_ok(name: &str, obj: &str, mtl: Option<&str>) -> Scene {
     let dir = tempfile::tempdir().unwrap();
     if let Some(mtl) = mtl {
@@ -133,10 +141,7 @@ fn a_latin1_file_is_read_with_a_warning() {
     let scene = load(&path).unwrap();
     assert_eq!(scene.albedo[0], [0.25, 0.5, 0.125]);
     assert_eq!(scene.material_name(0), Some("b\u{fc}ro"));
-    let encoding: Vec<String> = (scene.warnings.iter())
-        .filter(|w| w.contains("Latin-1"))
-        .map(|w| w.to_string())
-        .collect();
+    let encoding = warnings_containing(&scene, "Latin-1");
     assert_eq!(encoding.len(), 2, "{encoding:?}");
     assert!(encoding[0].contains("latin1.obj:2:"), "{encoding:?}");
     assert!(encoding[1].contains("m.mtl:1:"), "{encoding:?}");
@@ -261,10 +266,7 @@ fn a_transparent_material_is_opaque_with_a_warning() {
         Some("newmtl wall\nd 1.0\nKd 0.5 0.5 0.5\nnewmtl glass\nKd 0.1 0.1 0.1\nd 0.25\n"),
     );
     assert_eq!(scene.albedo[0], [0.1; 3]);
-    let transparent: Vec<String> = (scene.warnings.iter())
-        .filter(|w| w.contains("transparency"))
-        .map(|w| w.to_string())
-        .collect();
+    let transparent = warnings_containing(&scene, "transparency");
     assert_eq!(transparent.len(), 1, "{transparent:?}");
     assert!(
         transparent[0].contains("m.mtl:6:") && transparent[0].contains("'glass'"),
@@ -293,10 +295,7 @@ fn a_white_albedo_of_one_is_lowered_with_a_warning() {
         "{:?}",
         scene.albedo
     );
-    let lowered: Vec<String> = (scene.warnings.iter())
-        .filter(|w| w.contains("lowered"))
-        .map(|w| w.to_string())
-        .collect();
+    let lowered = warnings_containing(&scene, "lowered");
     assert_eq!(lowered.len(), 1, "{lowered:?}");
     assert!(
         lowered[0].contains("scene.mtl:5:") && lowered[0].contains("'white'"),

@@ -23,8 +23,8 @@ pub enum Triangulated {
     /// A concave polygon, ear-clipped.
     EarClipped,
     /// A concave polygon that could not be ear-clipped (it crosses itself, or has more than
-    /// [`MAX_EAR_CLIPPED_CORNERS`] corners): fanned from the corner where clipping stopped,
-    /// so its triangles may cover area outside it.
+    /// [`MAX_EAR_CLIPPED_CORNERS`] corners): fanned from its first corner, so its triangles
+    /// may cover area outside it.
     NotSimple,
 }
 
@@ -41,60 +41,63 @@ pub enum Triangulated {
 /// Never; fewer than 3 corners give no triangles.
 pub fn triangulate(corners: &[DVec3]) -> (Vec<[usize; 3]>, Triangulated) {
     let n = corners.len();
-    let fan = |first: usize| -> Vec<[usize; 3]> { (1..n - 1).map(|i| [first, i, i + 1]).collect() };
-    if n < 3 {
-        return (Vec::new(), Triangulated::Fan);
-    }
-    if n == 3 {
-        return (fan(0), Triangulated::Fan);
+    let fan = || -> Vec<[usize; 3]> { (1..n.saturating_sub(1)).map(|i| [0, i, i + 1]).collect() };
+    if n <= 3 {
+        return (fan(), Triangulated::Fan);
     }
     let Some(points) = projected(corners) else {
-        return (fan(0), Triangulated::Fan);
+        return (fan(), Triangulated::Fan);
     };
     let tol = ear_tolerance(&points);
     let turn = |a: DVec2, b: DVec2, c: DVec2| (b - a).perp_dot(c - b);
     if (0..n).all(|i| turn(points[i], points[(i + 1) % n], points[(i + 2) % n]) >= -tol) {
-        return (fan(0), Triangulated::Fan);
+        return (fan(), Triangulated::Fan);
     }
     if n > MAX_EAR_CLIPPED_CORNERS {
-        return (fan(0), Triangulated::NotSimple);
+        return (fan(), Triangulated::NotSimple);
     }
     match ear_clip(&points) {
         Some(triangles) => (triangles, Triangulated::EarClipped),
-        None => (fan(0), Triangulated::NotSimple),
+        None => (fan(), Triangulated::NotSimple),
     }
 }
 
-/// The corners in 2-D coordinates of their plane (the Newell normal's), turned so that the
-/// polygon runs counter-clockwise; `None` when the polygon has no area.
+/// The corners in 2-D coordinates of their plane ([`PlaneFrame`] of the Newell normal, so that
+/// the polygon runs counter-clockwise); `None` when the polygon has no area.
 fn projected(corners: &[DVec3]) -> Option<Vec<DVec2>> {
     let n = corners.len();
     let origin = corners[0];
     let normal = (0..n).fold(DVec3::ZERO, |acc, i| {
         acc + (corners[i] - origin).cross(corners[(i + 1) % n] - origin)
     });
-    let abs = normal.abs();
-    if !(abs.max_element() > 0.0 && normal.is_finite()) {
-        return None;
+    let unit = normal.try_normalize()?;
+    let frame = PlaneFrame::new(origin, unit);
+    Some(corners.iter().map(|&p| frame.flat(p)).collect())
+}
+
+/// A frame of the plane through `origin` with unit normal `n`: 2-D coordinates,
+/// counter-clockwise seen from the side `n` points to.
+pub struct PlaneFrame {
+    /// The point of the plane at 2-D coordinates (0, 0).
+    pub origin: DVec3,
+    u: DVec3,
+    v: DVec3,
+}
+
+impl PlaneFrame {
+    /// The frame of the plane through `origin` with unit normal `n`.
+    pub fn new(origin: DVec3, n: DVec3) -> PlaneFrame {
+        let across = if n.x.abs() < 0.6 { DVec3::X } else { DVec3::Y };
+        let u = across.cross(n).normalize();
+        let v = n.cross(u);
+        PlaneFrame { origin, u, v }
     }
-    // Drop the normal's largest axis; flip one kept axis when the normal points down it.
-    let (a, b, axis) = if abs.x >= abs.y && abs.x >= abs.z {
-        (1, 2, 0)
-    } else if abs.y >= abs.z {
-        (2, 0, 1)
-    } else {
-        (0, 1, 2)
-    };
-    let sign = normal[axis].signum();
-    Some(
-        corners
-            .iter()
-            .map(|&p| {
-                let d = p - origin;
-                DVec2::new(d[a], sign * d[b])
-            })
-            .collect(),
-    )
+
+    /// The 2-D coordinates of `p` (projected on the plane along its normal).
+    pub fn flat(&self, p: DVec3) -> DVec2 {
+        let d = p - self.origin;
+        DVec2::new(d.dot(self.u), d.dot(self.v))
+    }
 }
 
 /// The tolerance of [`ear_clip`] for `points`: [`EAR_TOLERANCE`] times their largest distance

@@ -80,15 +80,19 @@ pub fn load_obj(path: &Path, options: &SceneOptions) -> Result<Scene> {
             .unwrap_or([0.0; 3]);
         // Faces as tobj read them (every face a triangle when `face_arities` is empty),
         // triangulated here: fans for convex polygons, ear clipping for concave ones.
-        let mut start = 0usize;
-        let arities = mesh.face_arities.iter().map(|&a| a as usize);
-        let triangles_only = std::iter::repeat_n(3, mesh.indices.len() / 3);
-        let faces: Box<dyn Iterator<Item = usize>> = if mesh.face_arities.is_empty() {
-            Box::new(triangles_only)
+        let all_triangles = mesh.face_arities.is_empty();
+        let faces = if all_triangles {
+            mesh.indices.len() / 3
         } else {
-            Box::new(arities)
+            mesh.face_arities.len()
         };
-        for arity in faces {
+        let mut start = 0usize;
+        for f in 0..faces {
+            let arity = if all_triangles {
+                3
+            } else {
+                mesh.face_arities[f] as usize
+            };
             let Some(face) = mesh.indices.get(start..start + arity) else {
                 break;
             };

@@ -7,6 +7,7 @@ use crate::scene::Scene;
 use glam::{DVec2, DVec3};
 use std::collections::HashMap;
 
+use crate::geometry::polygon::PlaneFrame;
 use crate::geometry::tolerances::{
     VARIANT_AREA_MATCH, VARIANT_COLLINEAR, VARIANT_OVERLAP, VARIANT_PLANE, VARIANT_SAME_NORMAL,
 };
@@ -28,27 +29,6 @@ pub(super) fn unit_normal(c: &[DVec3; 3]) -> DVec3 {
 pub(super) struct Merged {
     pub(super) tris: Vec<[DVec3; 3]>,
     pub(super) flat: Vec<[DVec2; 3]>,
-}
-
-/// A frame of the plane through `origin` with unit normal `n`: 2D coordinates, counter-clockwise
-/// seen from the side `n` points to.
-pub(super) struct PlaneFrame {
-    pub(super) origin: DVec3,
-    pub(super) u: DVec3,
-    pub(super) v: DVec3,
-}
-
-impl PlaneFrame {
-    pub(super) fn new(origin: DVec3, n: DVec3) -> PlaneFrame {
-        let across = if n.x.abs() < 0.6 { DVec3::X } else { DVec3::Y };
-        let u = across.cross(n).normalize();
-        let v = n.cross(u);
-        PlaneFrame { origin, u, v }
-    }
-    pub(super) fn flat(&self, p: DVec3) -> DVec2 {
-        let d = p - self.origin;
-        DVec2::new(d.dot(self.u), d.dot(self.v))
-    }
 }
 
 pub(super) fn flat_area(t: &[DVec2; 3]) -> f64 {
