@@ -208,6 +208,39 @@ impl NodePoint {
         }
     }
 
+    /// The plane's unit normal of a flat node, `None` for a curved one.
+    #[inline]
+    pub fn flat_normal(&self) -> Option<glam::DVec3> {
+        let n = glam::Vec3::from_array(self.normal).as_dvec3();
+        (n != glam::DVec3::ZERO).then_some(n)
+    }
+
+    /// The factor that turns a cluster link's intensity, which a flat sender (normal `n_s`)
+    /// sends along `w` (unit, from its centroid to the receiver node's: the direction of
+    /// [`ClusterLink`]), into what it sends along `v` (unit, toward one receiving point): the
+    /// ratio of the sender's cosines `(n_s . v) / (n_s . w)`, or 0 when the two differ in sign
+    /// or `n_s . w` is 0 (the point lies on the other side of the sender's plane, which sends
+    /// what the link does not carry). 1 for a curved sender.
+    ///
+    /// Every term of a flat sender's intensity, radiance and antiradiance alike, is its area
+    /// times `|n_s . w|`, so the ratio is exact for it; evaluated at the receiver node's
+    /// centroid instead, every element of a large receiver took the cosine of its centre.
+    /// Near a concave edge that is the larger one (the centre is farther from the sender's
+    /// plane): a closed box's row sums were 1.055 on the triangles along its edges, the
+    /// 66k-triangle Cornell box 3.95% too bright there.
+    #[inline]
+    pub fn cosine_ratio(&self, w: glam::DVec3, v: glam::DVec3) -> f64 {
+        let Some(n) = self.flat_normal() else {
+            return 1.0;
+        };
+        let (c_link, c_point) = (n.dot(w), n.dot(v));
+        if c_link * c_point > 0.0 {
+            c_point / c_link
+        } else {
+            0.0
+        }
+    }
+
     /// The centroid in f64.
     #[inline]
     pub fn centroid(&self) -> glam::DVec3 {

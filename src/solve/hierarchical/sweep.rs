@@ -82,6 +82,14 @@ impl SweepContext<'_> {
         }
     }
 
+    /// The direction of cluster link `l` (unit, from its sender's centroid to its receiver's),
+    /// along which [`Self::pull`] measures its intensity.
+    #[inline]
+    pub(super) fn link_direction(&self, l: &ClusterLink) -> DVec3 {
+        (self.points[l.receiver as usize].centroid() - self.points[l.sender as usize].centroid())
+            .normalize_or_zero()
+    }
+
     /// What a cluster link gives an element with normal `n_e` at `x_e` and spread `s_e`
     /// ([`crate::hierarchy::links::element_spread`]): irradiance `(cos g - n_r . tilt g^2) / pi`
     /// per unit of the link's intensity, `g = 1 / (d^2 + s)` with the sender's and the
@@ -91,7 +99,8 @@ impl SweepContext<'_> {
     /// s_anti) Omega_bin)` in the link's bin where the light arrives at a side that creates it
     /// (the front, and the back too when `back`). For a two-sided element (`two`), light
     /// arriving at its back gives a negative irradiance factor, the irradiance of its back
-    /// face (normal `n_r = -n_e`).
+    /// face (normal `n_r = -n_e`). Both are turned from the link's direction to the
+    /// element's ([`crate::hierarchy::links::NodePoint::cosine_ratio`]).
     #[inline]
     pub(super) fn pair_factor(
         &self,
@@ -111,6 +120,7 @@ impl SweepContext<'_> {
         let inv_d = 1.0 / d2.sqrt();
         let cos = -n_e.dot(v) * inv_d;
         let kernel = sender.kernel_toward(v, d2, inv_d);
+        let turn = sender.cosine_ratio(self.link_direction(l), v * inv_d);
         // The receiving element's own extent, by the same expansion as the sender's
         // (`NodePoint::kernel_toward`) with the roles swapped.
         let receiver = crate::hierarchy::links::receiver_spread(s_e, cos, d2);
@@ -130,8 +140,8 @@ impl SweepContext<'_> {
             0.0
         };
         PairFactor {
-            irradiance: irradiance as f32,
-            anti: anti as f32,
+            irradiance: (turn * irradiance) as f32,
+            anti: (turn * anti) as f32,
         }
     }
 
@@ -149,9 +159,7 @@ impl SweepContext<'_> {
         (radiance, radiance_back): (&[[f64; C]], &[[f64; C]]),
         anti: &[[f32; C]],
     ) -> [f32; C] {
-        let w = (self.points[l.receiver as usize].centroid()
-            - self.points[l.sender as usize].centroid())
-        .normalize_or_zero();
+        let w = self.link_direction(l);
         let bin = l.bin as usize;
         let mut acc = [0.0f64; C];
         // The state is read only where a term uses it (see [`pull_term`]).

@@ -17,7 +17,10 @@
 //! - the receiver's extent (largest distance of an element's centroid from the node's
 //!   centroid) is at most [`SolverOptions::field_ratio`] times the distance from the sender
 //!   (with the sender's spread): the expansion's third-order remainder is then about
-//!   `4 ratio^3` of the link's value at the edge of the node.
+//!   `4 ratio^3` of the link's value at the edge of the node;
+//! - for a flat sender, the receiver's extent is at most [`FIELD_TURN`] times its centroid's
+//!   height above the sender's plane (the sender's cosine, which varies over the receiver, is
+//!   in the field to first order).
 //!
 //! Everything else is gathered per element (the near field). On the seed room the fields
 //! change the result by 0.009% (per-element gather of every link: `field_ratio` 0).
@@ -26,6 +29,13 @@ use super::*;
 
 /// Nodes with fewer elements gather every link per element.
 pub(super) const MIN_FIELD_ELEMENTS: u32 = 2;
+
+/// Largest receiver extent, over its centroid's height above a flat sender's plane, of a link
+/// gathered through a field: the sender's cosine then varies by at most this share over the
+/// receiver, which the field holds to first order
+/// ([`crate::hierarchy::links::NodePoint::cosine_ratio`]); the rest of such links are gathered
+/// per element, with the exact ratio.
+pub(super) const FIELD_TURN: f64 = 0.5;
 
 /// A field link's key: the receiver slabs that see its sender in front (a bit mask) above
 /// `MASK_SHIFT`, its bin below; [`NEAR`] for a link gathered per element.

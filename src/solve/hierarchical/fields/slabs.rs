@@ -191,6 +191,13 @@ impl Prepared {
         if !(view.extent * view.extent <= ratio * ratio * d2) {
             return NEAR;
         }
+        // A flat sender's cosine varies over the receiver by up to its extent over its height
+        // above the sender's plane; the field holds it to first order.
+        if let Some(n_s) = sender.flat_normal() {
+            if !(view.extent <= FIELD_TURN * n_s.dot(rn.centroid - p).abs()) {
+                return NEAR;
+            }
+        }
         match self.front_slabs(l.receiver, p, view) {
             Some(mask) => u32::from(mask) << MASK_SHIFT | u32::from(l.bin),
             None => NEAR,

@@ -3,10 +3,10 @@
 
 use super::*;
 
-/// Irradiance field terms per channel: `G` at the centre (3), its symmetric Jacobian (6), and
-/// its second derivatives as the vector `A` (3) and the symmetric tensor `T` (10) of
-/// [`SweepContext::sum_fields`].
-pub(super) const IRR_TERMS: usize = 22;
+/// Irradiance field terms per channel: `G` at the centre (3), its Jacobian's symmetric part
+/// (6), its second derivatives as the vector `A` (3) and the symmetric tensor `T` (10), and the
+/// Jacobian's antisymmetric part (3: `xy, xz, yz`) of [`SweepContext::sum_fields`].
+pub(super) const IRR_TERMS: usize = 25;
 
 /// Antiradiance field terms per channel: the value at the centre, its gradient (3) and its
 /// symmetric Hessian (6).
@@ -60,7 +60,14 @@ impl SweepContext<'_> {
     ///   `A = k q v` and `T = k (q' / r) v v v`: an element at `c_r + x` with normal `n` gets
     ///   `n . G + n . J x + (2 (n . x)(A . x) + |x|^2 (n . A) + T(n, x, x)) / 2`;
     /// - the antiradiance `1 / (D Omega)`, its gradient `-2 v / (D^2 Omega)` and Hessian
-    ///   `(-2 I / D^2 + 8 v v^T / D^3) / Omega`.
+    ///   `(-2 I / D^2 + 8 v v^T / D^3) / Omega`;
+    /// - both times the sender's cosine toward the point over the link's
+    ///   ([`crate::hierarchy::links::NodePoint::cosine_ratio`]) for a flat sender, to first
+    ///   order: `t = (n_s . v / r) / (n_s . w)`, whose gradient `(n_s - (n_s . v / r) v / r) /
+    ///   (r n_s . w)` adds `G grad(t)^T` to the Jacobian (no longer symmetric: its
+    ///   antisymmetric part is kept apart) and `grad(t) / (D Omega)` to the antiradiance's
+    ///   gradient. Such links are fields only while the linear term stays within
+    ///   [`super::FIELD_TURN`] ([`SweepContext::field_key`]).
     ///
     /// A first-order expansion was tried: the kernels are convex, so it is low everywhere but
     /// at the centre (the room 0.17% darker), and its remainder limited the fields to
@@ -118,7 +125,8 @@ impl SweepContext<'_> {
         let mut a = [[0.0f64; C]; ANTI_TERMS];
         let k = -std::f64::consts::FRAC_1_PI;
         for j in fields.slot_links(f, s) {
-            let sender = &self.points[links.cluster[j].sender as usize];
+            let link = &links.cluster[j];
+            let sender = &self.points[link.sender as usize];
             let v = center - sender.centroid();
             let r2 = v.length_squared();
             if !(r2 > 0.0) {
@@ -127,6 +135,22 @@ impl SweepContext<'_> {
             let r = r2.sqrt();
             let inv_r = 1.0 / r;
             let kernel = sender.kernel_toward(v, r2, inv_r);
+            // The sender's cosine toward x over the link's, t(x), at the centre and its gradient.
+            let (turn, turn_grad) = match sender.flat_normal() {
+                Some(n_s) => {
+                    let w = self.link_direction(link);
+                    let c_link = n_s.dot(w);
+                    let c = n_s.dot(v) * inv_r;
+                    let turn = sender.cosine_ratio(w, v * inv_r);
+                    let grad = if turn > 0.0 {
+                        (n_s - v * (c * inv_r)) * (inv_r / c_link)
+                    } else {
+                        DVec3::ZERO
+                    };
+                    (turn, grad)
+                }
+                None => (1.0, DVec3::ZERO),
+            };
             let spread = kernel.irradiance
                 + receiver.map_or(0.0, |(s_e, n_e)| {
                     crate::hierarchy::links::receiver_spread(s_e, n_e.dot(v) * inv_r, r2)
@@ -137,13 +161,14 @@ impl SweepContext<'_> {
             let vv = [v.x, v.y, v.z];
             if self.use_anti && with_anti {
                 let phi = 1.0 / (big_d_ar * omega);
-                let grad = v * (-2.0 * phi / big_d_ar);
+                let grad = (v * (-2.0 * phi / big_d_ar)) * turn + turn_grad * phi;
                 let hess = |p: usize, q: usize| {
-                    phi * ((if p == q { -2.0 } else { 0.0 }) + 8.0 * vv[p] * vv[q] / big_d_ar)
+                    turn * phi
+                        * ((if p == q { -2.0 } else { 0.0 }) + 8.0 * vv[p] * vv[q] / big_d_ar)
                         / big_d_ar
                 };
                 let t = [
-                    phi,
+                    turn * phi,
                     grad.x,
                     grad.y,
                     grad.z,
@@ -166,24 +191,32 @@ impl SweepContext<'_> {
             let dq_over_r = -(6.0 / (r3 * big_d * big_d)
                 - 3.0 * (3.0 * r2 + spread) / (r3 * r2 * big_d * big_d)
                 - 4.0 * (3.0 * r2 + spread) / (r3 * big_d * big_d * big_d));
-            let jac = |p: usize, s: usize| k * ((if p == s { h } else { 0.0 }) + q * vv[p] * vv[s]);
-            let mut t = [0.0f64; IRR_TERMS];
             // G, with the sender's tilt term at the centre (`n . G` gains `-n . tilt / (pi
             // D^2)`; its variation over the field is left out).
             let g = v * (k * h) + kernel.tilt * (k / (big_d * big_d));
-            t[..3].copy_from_slice(&g.to_array());
+            let (gg, tg) = (g.to_array(), turn_grad.to_array());
+            // The Jacobian of t G: t J + G grad(t)^T.
+            let jac = |p: usize, s: usize| {
+                turn * k * ((if p == s { h } else { 0.0 }) + q * vv[p] * vv[s]) + gg[p] * tg[s]
+            };
+            let sym = |p: usize, s: usize| 0.5 * (jac(p, s) + jac(s, p));
+            let anti = |p: usize, s: usize| 0.5 * (jac(p, s) - jac(s, p));
+            let mut t = [0.0f64; IRR_TERMS];
+            t[..3].copy_from_slice(&(g * turn).to_array());
             t[3..9].copy_from_slice(&[
-                jac(0, 0),
-                jac(0, 1),
-                jac(0, 2),
-                jac(1, 1),
-                jac(1, 2),
-                jac(2, 2),
+                sym(0, 0),
+                sym(0, 1),
+                sym(0, 2),
+                sym(1, 1),
+                sym(1, 2),
+                sym(2, 2),
             ]);
-            t[9..12].copy_from_slice(&[k * q * v.x, k * q * v.y, k * q * v.z]);
+            let kq = turn * k * q;
+            t[9..12].copy_from_slice(&[kq * v.x, kq * v.y, kq * v.z]);
             for (u, [p, s, w]) in SYM3.iter().enumerate() {
-                t[12 + u] = k * dq_over_r * vv[*p] * vv[*s] * vv[*w];
+                t[12 + u] = turn * k * dq_over_r * vv[*p] * vv[*s] * vv[*w];
             }
+            t[22..25].copy_from_slice(&[anti(0, 1), anti(0, 2), anti(1, 2)]);
             for (acc, t) in irr.iter_mut().zip(t) {
                 for c in 0..C {
                     acc[c] += t * i[c];
@@ -269,7 +302,8 @@ impl SweepContext<'_> {
 
 /// The weights of an irradiance group's terms ([`SweepContext::sum_fields`]) for an element
 /// with normal `n` at `dx` from the field's centre: `n . G + n . J dx + (2 (n . dx)(A . dx) +
-/// |dx|^2 (n . A) + T(n, dx, dx)) / 2`, with `J` and `T` symmetric.
+/// |dx|^2 (n . A) + T(n, dx, dx)) / 2`, with `T` symmetric and `J` its symmetric part plus its
+/// antisymmetric part `K` (`n . K dx = sum over p < q of K_pq (n_p dx_q - n_q dx_p)`).
 fn irradiance_weights(n: DVec3, dx: DVec3) -> [f64; IRR_TERMS] {
     let (nn, xx) = ([n.x, n.y, n.z], [dx.x, dx.y, dx.z]);
     let mut w = [0.0f64; IRR_TERMS];
@@ -293,6 +327,9 @@ fn irradiance_weights(n: DVec3, dx: DVec3) -> [f64; IRR_TERMS] {
                 w[12 + SYM3_INDEX[9 * i + 3 * j + l]] += 0.5 * nn[i] * xx[j] * xx[l];
             }
         }
+    }
+    for (u, (p, s)) in [(0, 1), (0, 2), (1, 2)].into_iter().enumerate() {
+        w[22 + u] = nn[p] * xx[s] - nn[s] * xx[p];
     }
     w
 }
