@@ -31,11 +31,15 @@ use super::*;
 pub(super) const MIN_FIELD_ELEMENTS: u32 = 2;
 
 /// Largest receiver extent, over its centroid's height above a flat sender's plane, of a link
-/// gathered through a field: the sender's cosine then varies by at most this share over the
-/// receiver, which the field holds to first order
-/// ([`crate::hierarchy::links::NodePoint::cosine_ratio`]); the rest of such links are gathered
-/// per element, with the exact ratio.
-pub(super) const FIELD_TURN: f64 = 0.5;
+/// gathered through a field. The sender's cosine varies over the receiver by at most this share
+/// of its value at the centroid, and the field holds it to first order
+/// ([`crate::hierarchy::links::NodePoint::cosine_ratio`]); at 1 the linear cosine stays
+/// non-negative over the receiver. The rest of such links are gathered per element, with the
+/// exact ratio. The 66k-triangle Cornell box (rms against its path-traced references, the
+/// references' noise removed) and the element-link pairs a sweep evaluates per element: 0.25
+/// 1.254%, 11.6M; 0.5 1.245%, 5.7M; 1 1.242%, 3.7M; 2 1.243%, 2.9M (a closed box's furnace
+/// 2.0031, 2.0040 and 2.0045 at 0.5, 1 and 2, for 2 exactly).
+pub(super) const FIELD_TURN: f64 = 1.0;
 
 /// A field link's key: the receiver slabs that see its sender in front (a bit mask) above
 /// `MASK_SHIFT`, its bin below; [`NEAR`] for a link gathered per element.
