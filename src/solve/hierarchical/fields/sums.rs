@@ -4,9 +4,14 @@
 use super::*;
 
 /// Irradiance field terms per channel: `G` at the centre (3), its Jacobian's symmetric part
-/// (6), its second derivatives as the vector `A` (3) and the symmetric tensor `T` (10), and the
-/// Jacobian's antisymmetric part (3: `xy, xz, yz`) of [`SweepContext::sum_fields`].
-pub(super) const IRR_TERMS: usize = 25;
+/// (6), its second derivatives as the vector `A` (3) and the symmetric tensor `T` (10), the
+/// Jacobian's antisymmetric part (3: `xy, xz, yz`), and the second derivatives that a flat
+/// sender's cosine adds, `E_pqr` symmetric in `q, r` (18: per `p`, `xx, xy, xz, yy, yz, zz`),
+/// of [`SweepContext::sum_fields`].
+pub(super) const IRR_TERMS: usize = 43;
+
+/// The pairs `(q, r)`, `q <= r`, in the order of a symmetric 3 x 3 matrix's upper triangle.
+const UPPER: [(usize, usize); 6] = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
 
 /// Antiradiance field terms per channel: the value at the centre, its gradient (3) and its
 /// symmetric Hessian (6).
@@ -62,12 +67,15 @@ impl SweepContext<'_> {
     /// - the antiradiance `1 / (D Omega)`, its gradient `-2 v / (D^2 Omega)` and Hessian
     ///   `(-2 I / D^2 + 8 v v^T / D^3) / Omega`;
     /// - both times the sender's cosine toward the point over the link's
-    ///   ([`crate::hierarchy::links::NodePoint::cosine_ratio`]) for a flat sender, to first
-    ///   order: `t = (n_s . v / r) / (n_s . w)`, whose gradient `(n_s - (n_s . v / r) v / r) /
-    ///   (r n_s . w)` adds `G grad(t)^T` to the Jacobian (no longer symmetric: its
-    ///   antisymmetric part is kept apart) and `grad(t) / (D Omega)` to the antiradiance's
-    ///   gradient. Such links are fields only while the linear term stays within
-    ///   [`super::FIELD_TURN`] ([`SweepContext::field_key`]).
+    ///   ([`crate::hierarchy::links::NodePoint::cosine_ratio`]) for a flat sender, to second
+    ///   order: `t = (n_s . v) / (r n_s . w)`, with gradient `(n_s - t' v / r) / (r n_s . w)`
+    ///   (`t' = n_s . v / r`) and Hessian `(3 a v v^T / r^2 - a I - n_s v^T - v n_s^T) /
+    ///   (r^3 n_s . w)` (`a = n_s . v`). The product `t G` adds `G grad(t)^T` to the Jacobian
+    ///   (no longer symmetric: its antisymmetric part is kept apart) and `E_pqr = J_pq t_r +
+    ///   J_pr t_q + G_p t_qr` to the second derivatives; `t phi` adds `phi grad(t)` to the
+    ///   antiradiance's gradient and `grad(t) grad(phi)^T + grad(phi) grad(t)^T + phi H(t)` to
+    ///   its Hessian. Such links are fields only while the linear term stays within
+    ///   [`super::FIELD_TURN`] (`field_key`).
     ///
     /// A first-order expansion was tried: the kernels are convex, so it is low everywhere but
     /// at the centre (the room 0.17% darker), and its remainder limited the fields to
@@ -135,22 +143,36 @@ impl SweepContext<'_> {
             let r = r2.sqrt();
             let inv_r = 1.0 / r;
             let kernel = sender.kernel_toward(v, r2, inv_r);
-            // The sender's cosine toward x over the link's, t(x), at the centre and its gradient.
-            let (turn, turn_grad) = match sender.flat_normal() {
+            // The sender's cosine toward x over the link's, t(x), at the centre, with its
+            // gradient and Hessian.
+            let (turn, turn_grad, turn_hess) = match sender.flat_normal() {
                 Some(n_s) => {
                     let w = self.link_direction(link);
                     let c_link = n_s.dot(w);
-                    let c = n_s.dot(v) * inv_r;
                     let turn = sender.cosine_ratio(w, v * inv_r);
-                    let grad = if turn > 0.0 {
-                        (n_s - v * (c * inv_r)) * (inv_r / c_link)
+                    if turn > 0.0 {
+                        let a = n_s.dot(v);
+                        let grad = (n_s - v * (a * inv_r * inv_r)) * (inv_r / c_link);
+                        let scale = inv_r * inv_r * inv_r / c_link;
+                        let (nn, vv) = (n_s.to_array(), v.to_array());
+                        let hess: [[f64; 3]; 3] = std::array::from_fn(|p| {
+                            std::array::from_fn(|q| {
+                                let diagonal = if p == q { a } else { 0.0 };
+                                scale
+                                    * (3.0 * a * vv[p] * vv[q] * inv_r * inv_r
+                                        - diagonal
+                                        - nn[p] * vv[q]
+                                        - vv[p] * nn[q])
+                            })
+                        });
+                        (turn, grad, hess)
                     } else {
-                        DVec3::ZERO
-                    };
-                    (turn, grad)
+                        (turn, DVec3::ZERO, [[0.0; 3]; 3])
+                    }
                 }
-                None => (1.0, DVec3::ZERO),
+                None => (1.0, DVec3::ZERO, [[0.0; 3]; 3]),
             };
+            let tg = turn_grad.to_array();
             let spread = kernel.irradiance
                 + receiver.map_or(0.0, |(s_e, n_e)| {
                     crate::hierarchy::links::receiver_spread(s_e, n_e.dot(v) * inv_r, r2)
@@ -162,10 +184,14 @@ impl SweepContext<'_> {
             if self.use_anti && with_anti {
                 let phi = 1.0 / (big_d_ar * omega);
                 let grad = (v * (-2.0 * phi / big_d_ar)) * turn + turn_grad * phi;
+                let phi_grad = (v * (-2.0 * phi / big_d_ar)).to_array();
                 let hess = |p: usize, q: usize| {
                     turn * phi
                         * ((if p == q { -2.0 } else { 0.0 }) + 8.0 * vv[p] * vv[q] / big_d_ar)
                         / big_d_ar
+                        + tg[p] * phi_grad[q]
+                        + phi_grad[p] * tg[q]
+                        + phi * turn_hess[p][q]
                 };
                 let t = [
                     turn * phi,
@@ -194,11 +220,11 @@ impl SweepContext<'_> {
             // G, with the sender's tilt term at the centre (`n . G` gains `-n . tilt / (pi
             // D^2)`; its variation over the field is left out).
             let g = v * (k * h) + kernel.tilt * (k / (big_d * big_d));
-            let (gg, tg) = (g.to_array(), turn_grad.to_array());
-            // The Jacobian of t G: t J + G grad(t)^T.
-            let jac = |p: usize, s: usize| {
-                turn * k * ((if p == s { h } else { 0.0 }) + q * vv[p] * vv[s]) + gg[p] * tg[s]
-            };
+            let gg = g.to_array();
+            // G's Jacobian, and that of t G: t J + G grad(t)^T.
+            let radial =
+                |p: usize, s: usize| k * ((if p == s { h } else { 0.0 }) + q * vv[p] * vv[s]);
+            let jac = |p: usize, s: usize| turn * radial(p, s) + gg[p] * tg[s];
             let sym = |p: usize, s: usize| 0.5 * (jac(p, s) + jac(s, p));
             let anti = |p: usize, s: usize| 0.5 * (jac(p, s) - jac(s, p));
             let mut t = [0.0f64; IRR_TERMS];
@@ -217,6 +243,14 @@ impl SweepContext<'_> {
                 t[12 + u] = turn * k * dq_over_r * vv[*p] * vv[*s] * vv[*w];
             }
             t[22..25].copy_from_slice(&[anti(0, 1), anti(0, 2), anti(1, 2)]);
+            if turn_grad != DVec3::ZERO {
+                for p in 0..3 {
+                    for (u, &(a, b)) in UPPER.iter().enumerate() {
+                        t[25 + 6 * p + u] =
+                            radial(p, a) * tg[b] + radial(p, b) * tg[a] + gg[p] * turn_hess[a][b];
+                    }
+                }
+            }
             for (acc, t) in irr.iter_mut().zip(t) {
                 for c in 0..C {
                     acc[c] += t * i[c];
@@ -309,8 +343,7 @@ fn irradiance_weights(n: DVec3, dx: DVec3) -> [f64; IRR_TERMS] {
     let mut w = [0.0f64; IRR_TERMS];
     w[..3].copy_from_slice(&nn);
     // J's upper triangle: n_p x_s + n_s x_p off the diagonal.
-    let pairs = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
-    for (u, &(p, s)) in pairs.iter().enumerate() {
+    for (u, &(p, s)) in UPPER.iter().enumerate() {
         w[3 + u] = if p == s {
             nn[p] * xx[p]
         } else {
@@ -330,6 +363,13 @@ fn irradiance_weights(n: DVec3, dx: DVec3) -> [f64; IRR_TERMS] {
     }
     for (u, (p, s)) in [(0, 1), (0, 2), (1, 2)].into_iter().enumerate() {
         w[22 + u] = nn[p] * xx[s] - nn[s] * xx[p];
+    }
+    // E(n, dx, dx) / 2, E symmetric in its last two indices.
+    for p in 0..3 {
+        for (u, &(a, b)) in UPPER.iter().enumerate() {
+            let twice = if a == b { 0.5 } else { 1.0 };
+            w[25 + 6 * p + u] = twice * nn[p] * xx[a] * xx[b];
+        }
     }
     w
 }
