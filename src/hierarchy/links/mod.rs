@@ -271,8 +271,9 @@ pub fn expansion_weight(d2: f64, spread: f64) -> f64 {
 /// ([`element_spread`]) whose normal makes angle `theta_e` with the direction to the sender
 /// (`cos_e` its cosine, either sign), blended into 0 near the sender ([`expansion_weight`]),
 /// so at least `-d2 / 4`. The receiver's half of the second-order expansion whose sender half
-/// is [`NodePoint::kernel_toward`] (its term in the sender's normal is left out; it raised the
-/// closed-box furnace at albedo 0.8 from 10.05 to 10.08).
+/// is [`NodePoint::kernel_toward`]; its term in the sender's normal, which needs the sender's
+/// cosine toward the element, is added by the gather for flat senders
+/// ([`NodePoint::cosine_ratio`]).
 #[inline]
 pub fn receiver_spread(s_e: f64, cos_e: f64, d2: f64) -> f64 {
     expansion_weight(d2, s_e) * s_e * (3.0 * cos_e * cos_e - 1.0)

@@ -129,7 +129,19 @@ impl SweepContext<'_> {
             // The face that receives: the front (normal n_e) or a two-sided element's back
             // (normal -n_e, its irradiance negative).
             let n_r = if cos > 0.0 { n_e } else { -n_e };
-            let h = cos.abs() * g - n_r.dot(kernel.tilt) * g * g;
+            let mut h = turn * (cos.abs() * g - n_r.dot(kernel.tilt) * g * g);
+            // The receiver's extent's cross term, the sender's tilt with the roles swapped:
+            // `-s_e (n_s . n_r) cos_r^2 g^2` per unit of the sender's area times radiance, so
+            // over `n_s . w` per unit of the link's intensity (which is known only for a flat
+            // sender). It raised the closed-box furnace at albedo 0.8 from 9.96 to 9.99 (10
+            // exactly) on patches of 0.25 of the box.
+            if turn > 0.0 {
+                if let Some(n_s) = sender.flat_normal() {
+                    let c_link = n_s.dot(self.link_direction(l));
+                    let t = crate::hierarchy::links::expansion_weight(d2, s_e);
+                    h -= t * s_e * n_s.dot(n_r) * cos * cos * g * g / c_link;
+                }
+            }
             h.max(0.0).copysign(cos) * std::f64::consts::FRAC_1_PI
         } else {
             0.0
@@ -140,7 +152,7 @@ impl SweepContext<'_> {
             0.0
         };
         PairFactor {
-            irradiance: (turn * irradiance) as f32,
+            irradiance: irradiance as f32,
             anti: (turn * anti) as f32,
         }
     }

@@ -228,7 +228,21 @@ impl SweepContext<'_> {
             let sym = |p: usize, s: usize| 0.5 * (jac(p, s) + jac(s, p));
             let anti = |p: usize, s: usize| 0.5 * (jac(p, s) - jac(s, p));
             let mut t = [0.0f64; IRR_TERMS];
-            t[..3].copy_from_slice(&(g * turn).to_array());
+            // The receiving elements' cross term at the centre (a flat sender's to a flat
+            // receiver's; see `SweepContext::pair_factor`), per unit of the link's intensity;
+            // its variation over the field is left out.
+            let cross = match (sender.flat_normal(), receiver) {
+                (Some(n_s), Some((s_e, n_plane))) if turn > 0.0 => {
+                    let cos_r = -n_plane.dot(v) * inv_r;
+                    let n_r = if cos_r > 0.0 { n_plane } else { -n_plane };
+                    let c_link = n_s.dot(self.link_direction(link));
+                    let weight = crate::hierarchy::links::expansion_weight(r2, s_e);
+                    n_r * (-k * -(weight * s_e * n_s.dot(n_r) * cos_r * cos_r)
+                        / (big_d * big_d * c_link))
+                }
+                _ => DVec3::ZERO,
+            };
+            t[..3].copy_from_slice(&(g * turn + cross).to_array());
             t[3..9].copy_from_slice(&[
                 sym(0, 0),
                 sym(0, 1),
