@@ -707,4 +707,35 @@ mod kernel_tests {
         let k = disk.kernel_toward(x, x.length_squared(), 1.0 / x.length());
         assert_eq!((k.irradiance, k.anti, k.tilt), (1.0, 1.0, DVec3::ZERO));
     }
+
+    #[test]
+    fn a_flat_senders_light_is_turned_to_each_points_own_cosine() {
+        let flat = NodePoint {
+            centroid: [0.0; 3],
+            spread: 1.0,
+            disk_spread: 1.0,
+            normal: [0.0, 0.0, -1.0],
+        };
+        let curved = NodePoint {
+            normal: [0.0; 3],
+            ..flat
+        };
+        let w = DVec3::new(1.0, 0.0, 1.0).normalize();
+        let v = DVec3::new(3.0, 0.0, 1.0).normalize();
+        // Either orientation of the plane's normal gives the same ratio of cosines.
+        let ratio = flat.cosine_ratio(w, v);
+        assert!((ratio - v.z / w.z).abs() < 1e-6, "{ratio}");
+        assert!(
+            ratio < 1.0,
+            "a point nearer the sender's plane sees it more obliquely"
+        );
+        assert_eq!(curved.cosine_ratio(w, v), 1.0);
+        // A point on the other side of the sender's plane, or in it, gets nothing of the link.
+        assert_eq!(
+            flat.cosine_ratio(w, DVec3::new(1.0, 0.0, -0.1).normalize()),
+            0.0
+        );
+        assert_eq!(flat.cosine_ratio(w, DVec3::X), 0.0);
+        assert_eq!(flat.cosine_ratio(DVec3::X, v), 0.0);
+    }
 }
