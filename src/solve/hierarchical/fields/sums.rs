@@ -4,11 +4,10 @@
 use super::*;
 
 /// Irradiance field terms per channel: `G` at the centre (3), its Jacobian's symmetric part
-/// (6), its second derivatives as the vector `A` (3) and the symmetric tensor `T` (10), the
-/// Jacobian's antisymmetric part (3: `xy, xz, yz`), and the second derivatives that a flat
-/// sender's cosine adds, `E_pqr` symmetric in `q, r` (18: per `p`, `xx, xy, xz, yy, yz, zz`),
-/// of [`SweepContext::sum_fields`].
-pub(super) const IRR_TERMS: usize = 43;
+/// (6: `xx, xy, xz, yy, yz, zz`) and antisymmetric part (3: `xy, xz, yz`), and its second
+/// derivatives `N_pqr = d_q d_r G_p` (18: per `p`, the six `q <= r` in the same order) of
+/// [`SweepContext::sum_fields`].
+pub(super) const IRR_TERMS: usize = 30;
 
 /// The pairs `(q, r)`, `q <= r`, in the order of a symmetric 3 x 3 matrix's upper triangle.
 const UPPER: [(usize, usize); 6] = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
@@ -17,29 +16,8 @@ const UPPER: [(usize, usize); 6] = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 
 /// symmetric Hessian (6).
 pub(super) const ANTI_TERMS: usize = 10;
 
-/// The unique components of a symmetric 3-tensor, in the order of [`IRR_TERMS`]' last ten:
-/// `xxx, xxy, xxz, xyy, xyz, xzz, yyy, yyz, yzz, zzz`.
-const SYM3: [[usize; 3]; 10] = [
-    [0, 0, 0],
-    [0, 0, 1],
-    [0, 0, 2],
-    [0, 1, 1],
-    [0, 1, 2],
-    [0, 2, 2],
-    [1, 1, 1],
-    [1, 1, 2],
-    [1, 2, 2],
-    [2, 2, 2],
-];
-
-/// The index in [`SYM3`] of component `(i, j, k)` (any order), at `9 i + 3 j + k`.
-const SYM3_INDEX: [usize; 27] = [
-    0, 1, 2, 1, 3, 4, 2, 4, 5, 1, 3, 4, 3, 6, 7, 4, 7, 8, 2, 4, 5, 4, 7, 8, 5, 8, 9,
-];
-
-/// One sweep's field sums: per irradiance group, `G`, its Jacobian's upper triangle
-/// (`xx, xy, xz, yy, yz, zz`), `A` and `T` per channel; per slot, the antiradiance, its
-/// gradient and its Hessian's upper triangle.
+/// One sweep's field sums: per irradiance group, the [`IRR_TERMS`] of its `G` per channel; per
+/// slot, the antiradiance, its gradient and its Hessian's upper triangle.
 pub(crate) struct FieldSums<const C: usize> {
     pub(super) irr: Vec<[[f32; C]; IRR_TERMS]>,
     pub(super) anti: Vec<[[f32; C]; ANTI_TERMS]>,
@@ -61,9 +39,8 @@ impl SweepContext<'_> {
     /// `D = r^2 + s`, `h = 1 / (r D)`, `q = h' / r`, `k = -1 / pi`):
     ///
     /// - the irradiance field `G = k h v`, its Jacobian `k (h I + q v v^T)` and its second
-    ///   derivatives `k (q (d_ij v_k + d_ik v_j + d_jk v_i) + (q' / r) v_i v_j v_k)`, kept as
-    ///   `A = k q v` and `T = k (q' / r) v v v`: an element at `c_r + x` with normal `n` gets
-    ///   `n . G + n . J x + (2 (n . x)(A . x) + |x|^2 (n . A) + T(n, x, x)) / 2`;
+    ///   derivatives `N_pqr = k (q (d_qr v_p + d_pq v_r + d_pr v_q) + (q' / r) v_p v_q v_r)`:
+    ///   an element at `c_r + x` with normal `n` gets `n . G + n . J x + N(n, x, x) / 2`;
     /// - the antiradiance `1 / (D Omega)`, its gradient `-2 v / (D^2 Omega)` and Hessian
     ///   `(-2 I / D^2 + 8 v v^T / D^3) / Omega`;
     /// - both times the sender's cosine toward the point over the link's
@@ -71,8 +48,8 @@ impl SweepContext<'_> {
     ///   order: `t = (n_s . v) / (r n_s . w)`, with gradient `(n_s - t' v / r) / (r n_s . w)`
     ///   (`t' = n_s . v / r`) and Hessian `(3 a v v^T / r^2 - a I - n_s v^T - v n_s^T) /
     ///   (r^3 n_s . w)` (`a = n_s . v`). The product `t G` adds `G grad(t)^T` to the Jacobian
-    ///   (no longer symmetric: its antisymmetric part is kept apart) and `E_pqr = J_pq t_r +
-    ///   J_pr t_q + G_p t_qr` to the second derivatives; `t phi` adds `phi grad(t)` to the
+    ///   (no longer symmetric: its antisymmetric part is kept apart) and `J_pq t_r + J_pr t_q +
+    ///   G_p t_qr` to `N_pqr`; `t phi` adds `phi grad(t)` to the
     ///   antiradiance's gradient and `grad(t) grad(phi)^T + grad(phi) grad(t)^T + phi H(t)` to
     ///   its Hessian. Such links are fields only while the linear term stays within
     ///   [`super::FIELD_TURN`] (`field_key`).
@@ -222,11 +199,15 @@ impl SweepContext<'_> {
             let g = v * (k * h) + kernel.tilt * (k / (big_d * big_d));
             let gg = g.to_array();
             // G's Jacobian, and that of t G: t J + G grad(t)^T.
-            let radial =
-                |p: usize, s: usize| k * ((if p == s { h } else { 0.0 }) + q * vv[p] * vv[s]);
-            let jac = |p: usize, s: usize| turn * radial(p, s) + gg[p] * tg[s];
-            let sym = |p: usize, s: usize| 0.5 * (jac(p, s) + jac(s, p));
-            let anti = |p: usize, s: usize| 0.5 * (jac(p, s) - jac(s, p));
+            let flat = turn_grad != DVec3::ZERO;
+            let radial: [[f64; 3]; 3] = std::array::from_fn(|p| {
+                std::array::from_fn(|s| k * ((if p == s { h } else { 0.0 }) + q * vv[p] * vv[s]))
+            });
+            let jac: [[f64; 3]; 3] = std::array::from_fn(|p| {
+                std::array::from_fn(|s| turn * radial[p][s] + gg[p] * tg[s])
+            });
+            let sym = |p: usize, s: usize| 0.5 * (jac[p][s] + jac[s][p]);
+            let anti = |p: usize, s: usize| 0.5 * (jac[p][s] - jac[s][p]);
             let mut t = [0.0f64; IRR_TERMS];
             // The receiving elements' cross term at the centre (a flat sender's to a flat
             // receiver's; see `SweepContext::pair_factor`), per unit of the link's intensity;
@@ -251,18 +232,19 @@ impl SweepContext<'_> {
                 sym(1, 2),
                 sym(2, 2),
             ]);
-            let kq = turn * k * q;
-            t[9..12].copy_from_slice(&[kq * v.x, kq * v.y, kq * v.z]);
-            for (u, [p, s, w]) in SYM3.iter().enumerate() {
-                t[12 + u] = turn * k * dq_over_r * vv[*p] * vv[*s] * vv[*w];
-            }
-            t[22..25].copy_from_slice(&[anti(0, 1), anti(0, 2), anti(1, 2)]);
-            if turn_grad != DVec3::ZERO {
-                for p in 0..3 {
-                    for (u, &(a, b)) in UPPER.iter().enumerate() {
-                        t[25 + 6 * p + u] =
-                            radial(p, a) * tg[b] + radial(p, b) * tg[a] + gg[p] * turn_hess[a][b];
+            t[9..12].copy_from_slice(&[anti(0, 1), anti(0, 2), anti(1, 2)]);
+            // N: t times G's own second derivatives, plus the cosine's terms.
+            let delta = |a: usize, b: usize| if a == b { 1.0 } else { 0.0 };
+            let (tkq, tkr) = (turn * k * q, turn * k * dq_over_r);
+            for p in 0..3 {
+                for (u, &(a, b)) in UPPER.iter().enumerate() {
+                    let mut n = tkq
+                        * (delta(a, b) * vv[p] + delta(p, a) * vv[b] + delta(p, b) * vv[a])
+                        + tkr * vv[p] * vv[a] * vv[b];
+                    if flat {
+                        n += radial[p][a] * tg[b] + radial[p][b] * tg[a] + gg[p] * turn_hess[a][b];
                     }
+                    t[12 + 6 * p + u] = n;
                 }
             }
             for (acc, t) in irr.iter_mut().zip(t) {
@@ -349,9 +331,9 @@ impl SweepContext<'_> {
 }
 
 /// The weights of an irradiance group's terms ([`SweepContext::sum_fields`]) for an element
-/// with normal `n` at `dx` from the field's centre: `n . G + n . J dx + (2 (n . dx)(A . dx) +
-/// |dx|^2 (n . A) + T(n, dx, dx)) / 2`, with `T` symmetric and `J` its symmetric part plus its
-/// antisymmetric part `K` (`n . K dx = sum over p < q of K_pq (n_p dx_q - n_q dx_p)`).
+/// with normal `n` at `dx` from the field's centre: `n . G + n . J dx + N(n, dx, dx) / 2`, with
+/// `J` its symmetric part plus its antisymmetric part `K` (`n . K dx = sum over p < q of K_pq
+/// (n_p dx_q - n_q dx_p)`) and `N` symmetric in its last two indices.
 fn irradiance_weights(n: DVec3, dx: DVec3) -> [f64; IRR_TERMS] {
     let (nn, xx) = ([n.x, n.y, n.z], [dx.x, dx.y, dx.z]);
     let mut w = [0.0f64; IRR_TERMS];
@@ -364,25 +346,13 @@ fn irradiance_weights(n: DVec3, dx: DVec3) -> [f64; IRR_TERMS] {
             nn[p] * xx[s] + nn[s] * xx[p]
         };
     }
-    let (n_dx, dx2) = (n.dot(dx), dx.length_squared());
-    for p in 0..3 {
-        w[9 + p] = n_dx * xx[p] + 0.5 * dx2 * nn[p];
-    }
-    for i in 0..3 {
-        for j in 0..3 {
-            for l in 0..3 {
-                w[12 + SYM3_INDEX[9 * i + 3 * j + l]] += 0.5 * nn[i] * xx[j] * xx[l];
-            }
-        }
-    }
     for (u, (p, s)) in [(0, 1), (0, 2), (1, 2)].into_iter().enumerate() {
-        w[22 + u] = nn[p] * xx[s] - nn[s] * xx[p];
+        w[9 + u] = nn[p] * xx[s] - nn[s] * xx[p];
     }
-    // E(n, dx, dx) / 2, E symmetric in its last two indices.
     for p in 0..3 {
         for (u, &(a, b)) in UPPER.iter().enumerate() {
-            let twice = if a == b { 0.5 } else { 1.0 };
-            w[25 + 6 * p + u] = twice * nn[p] * xx[a] * xx[b];
+            let half = if a == b { 0.5 } else { 1.0 };
+            w[12 + 6 * p + u] = half * nn[p] * xx[a] * xx[b];
         }
     }
     w
