@@ -230,15 +230,8 @@ impl NodePoint {
     /// 66k-triangle Cornell box 3.95% too bright there.
     #[inline]
     pub fn cosine_ratio(&self, w: glam::DVec3, v: glam::DVec3) -> f64 {
-        let Some(n) = self.flat_normal() else {
-            return 1.0;
-        };
-        let (c_link, c_point) = (n.dot(w), n.dot(v));
-        if c_link * c_point > 0.0 {
-            c_point / c_link
-        } else {
-            0.0
-        }
+        self.flat_normal()
+            .map_or(1.0, |n| cosine_ratio(n.dot(w), n.dot(v)))
     }
 
     /// The centroid in f64.
@@ -249,6 +242,17 @@ impl NodePoint {
             self.centroid[1] as f64,
             self.centroid[2] as f64,
         )
+    }
+}
+
+/// [`NodePoint::cosine_ratio`] from a flat sender's cosines along the link (`c_link`) and
+/// toward the point (`c_point`): their ratio, 0 when they differ in sign or `c_link` is 0.
+#[inline]
+pub fn cosine_ratio(c_link: f64, c_point: f64) -> f64 {
+    if c_link * c_point > 0.0 {
+        c_point / c_link
+    } else {
+        0.0
     }
 }
 

@@ -120,7 +120,11 @@ impl SweepContext<'_> {
         let inv_d = 1.0 / d2.sqrt();
         let cos = -n_e.dot(v) * inv_d;
         let kernel = sender.kernel_toward(v, d2, inv_d);
-        let turn = sender.cosine_ratio(self.link_direction(l), v * inv_d);
+        // A flat sender's normal and its cosine along the link (from `pull`'s direction).
+        let flat = (sender.flat_normal()).map(|n_s| (n_s, n_s.dot(self.link_direction(l))));
+        let turn = flat.map_or(1.0, |(n_s, c_link)| {
+            crate::hierarchy::links::cosine_ratio(c_link, n_s.dot(v) * inv_d)
+        });
         // The receiving element's own extent, by the same expansion as the sender's
         // (`NodePoint::kernel_toward`) with the roles swapped.
         let receiver = crate::hierarchy::links::receiver_spread(s_e, cos, d2);
@@ -135,12 +139,9 @@ impl SweepContext<'_> {
             // over `n_s . w` per unit of the link's intensity (which is known only for a flat
             // sender). It raised the closed-box furnace at albedo 0.8 from 9.96 to 9.99 (10
             // exactly) on patches of 0.25 of the box.
-            if turn > 0.0 {
-                if let Some(n_s) = sender.flat_normal() {
-                    let c_link = n_s.dot(self.link_direction(l));
-                    let t = crate::hierarchy::links::expansion_weight(d2, s_e);
-                    h -= t * s_e * n_s.dot(n_r) * cos * cos * g * g / c_link;
-                }
+            if let Some((n_s, c_link)) = flat.filter(|_| turn > 0.0) {
+                let t = crate::hierarchy::links::expansion_weight(d2, s_e);
+                h -= t * s_e * n_s.dot(n_r) * cos * cos * g * g / c_link;
             }
             h.max(0.0).copysign(cos) * std::f64::consts::FRAC_1_PI
         } else {
