@@ -324,6 +324,19 @@ impl Prepared {
         }
         counts.slots = Some(self.live.slots() as u64);
         self.fields.keep_live(&self.tree, &self.live);
+        // The field links' terms, within what the pair cache left of its budget.
+        let pair_bytes = self.pairs.as_ref().map_or(0, PairCache::bytes);
+        let held = costs.bytes(&counts)
+            + pair_bytes
+            + self.fields.bytes()
+            + (self.fields).sweep_bytes(link_budget.costs.channels() as usize);
+        let terms_bytes = self.fields.terms_bytes();
+        if terms_bytes > 0 && terms_bytes <= own.saturating_sub(pair_bytes).min(budget.spare(held))
+        {
+            let mut fields = std::mem::take(&mut self.fields);
+            fields.cache_terms(&self.sweep_context(), &self.links);
+            self.fields = fields;
+        }
         let estimate = costs.bytes(&counts)
             + self.pairs.as_ref().map_or(0, PairCache::bytes)
             + self.fields.bytes()

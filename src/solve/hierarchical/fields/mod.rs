@@ -27,6 +27,9 @@
 
 use super::*;
 
+/// Terms a field link adds per unit of its intensity: irradiance, then antiradiance.
+pub(super) const LINK_TERMS: usize = IRR_TERMS + ANTI_TERMS;
+
 /// Nodes with fewer elements gather every link per element.
 pub(super) const MIN_FIELD_ELEMENTS: u32 = 2;
 
@@ -101,6 +104,12 @@ pub(super) struct Fields {
     /// (`elem_slab[elem_slab_start[e] ..]`).
     pub(super) elem_slab: Vec<u8>,
     pub(super) elem_slab_start: Vec<u32>,
+    /// Per field link, its terms per unit of its intensity (irradiance, then antiradiance),
+    /// when they fit the pair cache's budget ([`Fields::cache_terms`]); empty otherwise (each
+    /// sweep computes them again).
+    pub(super) terms: Vec<[f32; LINK_TERMS]>,
+    /// Per field: the index in `terms` of its first link.
+    pub(super) term_start: Vec<u32>,
     /// Links gathered through fields.
     pub(super) links: u64,
     /// (element, field) evaluations per sweep.
@@ -300,7 +309,48 @@ impl Fields {
             + self.group_mask.len() * (2 + 4)
             + self.slot_key.len() * (4 + 4 + 4)
             + self.of_element.len() * 8
-            + self.elem_slab.len()) as u64
+            + self.elem_slab.len()
+            + self.terms.len() * LINK_TERMS * 4
+            + self.term_start.len() * 4) as u64
+    }
+
+    /// Bytes the cached terms of every field link take ([`Fields::cache_terms`]).
+    pub(super) fn terms_bytes(&self) -> u64 {
+        self.links * (LINK_TERMS * 4) as u64 + self.node.len() as u64 * 4
+    }
+
+    /// Computes and keeps every field link's terms (`ctx` the sweep context of the prepared
+    /// scene whose fields these are): a sweep then sums each field's links as a stream of
+    /// multiply-adds instead of their geometry. Call after [`Fields::keep_live`] (a slot
+    /// without antiradiance sums caches none).
+    pub(super) fn cache_terms(&mut self, ctx: &SweepContext, links: &Links) {
+        let mut start = Vec::with_capacity(self.node.len() + 1);
+        let mut total = 0u32;
+        for f in 0..self.node.len() {
+            start.push(total);
+            let node = self.node[f] as usize;
+            total += links.cluster_start[node + 1] - self.near_end[node];
+        }
+        start.push(total);
+        let mut terms = vec![[0.0f32; LINK_TERMS]; total as usize];
+        split_by_start(&mut terms, &start)
+            .into_par_iter()
+            .enumerate()
+            .for_each(|(f, out)| {
+                let first = self.near_end[self.node[f] as usize] as usize;
+                for s in self.slot_start[f] as usize..self.slot_start[f + 1] as usize {
+                    let with_anti = ctx.use_anti && self.slot_sum[s] != NONE;
+                    for j in self.slot_links(f, s) {
+                        let (t, a) = ctx.link_terms(self, links, (f, s, j), with_anti);
+                        let dst = &mut out[j - first];
+                        for (d, x) in dst.iter_mut().zip(t.iter().chain(&a)) {
+                            *d = *x as f32;
+                        }
+                    }
+                }
+            });
+        self.terms = terms;
+        self.term_start = start;
     }
 
     /// Bytes of the per-sweep sums in `channels` channels.

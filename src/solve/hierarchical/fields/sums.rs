@@ -90,7 +90,8 @@ impl SweepContext<'_> {
     }
 
     /// The links of slot `s` of field `f`: adds their irradiance terms to `irr` and returns
-    /// their antiradiance terms (0 unless `with_anti`).
+    /// their antiradiance terms (0 unless `with_anti`), each link's terms from the cache when
+    /// there is one ([`Fields::cache_terms`]).
     fn sum_slot<const C: usize>(
         &self,
         fields: &Fields,
@@ -100,6 +101,46 @@ impl SweepContext<'_> {
         irr: &mut [[f64; C]; IRR_TERMS],
         with_anti: bool,
     ) -> [[f32; C]; ANTI_TERMS] {
+        let mut a = [[0.0f64; C]; ANTI_TERMS];
+        let cached = !fields.terms.is_empty();
+        let first = fields.near_end[fields.node[f] as usize] as usize;
+        for j in fields.slot_links(f, s) {
+            let i = intensity[j].map(f64::from);
+            let mut add = |t: &[f64], a_t: &[f64]| {
+                for (acc, t) in irr.iter_mut().zip(t) {
+                    for c in 0..C {
+                        acc[c] += t * i[c];
+                    }
+                }
+                if with_anti {
+                    for (acc, t) in a.iter_mut().zip(a_t) {
+                        for c in 0..C {
+                            acc[c] += t * i[c];
+                        }
+                    }
+                }
+            };
+            if cached {
+                let t = &fields.terms[fields.term_start[f] as usize + (j - first)];
+                let t = t.map(f64::from);
+                add(&t[..IRR_TERMS], &t[IRR_TERMS..]);
+            } else {
+                let (t, a_t) = self.link_terms(fields, links, (f, s, j), with_anti);
+                add(&t, &a_t);
+            }
+        }
+        a.map(|x| x.map(|y| y as f32))
+    }
+
+    /// The field terms of link `j` in slot `s` of field `f` per unit of its intensity:
+    /// irradiance ([`IRR_TERMS`]) and antiradiance ([`ANTI_TERMS`], 0 unless `with_anti`).
+    pub(super) fn link_terms(
+        &self,
+        fields: &Fields,
+        links: &Links,
+        (f, s, j): (usize, usize, usize),
+        with_anti: bool,
+    ) -> ([f64; IRR_TERMS], [f64; ANTI_TERMS]) {
         let center = fields.center[f];
         // The receiving elements' extent, when they share the field node's plane.
         let receiver = self.tree.nodes[fields.node[f] as usize]
@@ -107,15 +148,15 @@ impl SweepContext<'_> {
             .map(|(normal, _)| (fields.element_spread[f] as f64, normal));
         let (bin, _) = fields.slot_bin(s);
         let omega = self.bins.solid_angle[bin];
-        let mut a = [[0.0f64; C]; ANTI_TERMS];
         let k = -std::f64::consts::FRAC_1_PI;
-        for j in fields.slot_links(f, s) {
+        let mut a_t = [0.0f64; ANTI_TERMS];
+        {
             let link = &links.cluster[j];
             let sender = &self.points[link.sender as usize];
             let v = center - sender.centroid();
             let r2 = v.length_squared();
             if !(r2 > 0.0) {
-                continue;
+                return ([0.0; IRR_TERMS], a_t);
             }
             let r = r2.sqrt();
             let inv_r = 1.0 / r;
@@ -156,7 +197,6 @@ impl SweepContext<'_> {
                 });
             let big_d = r2 + spread;
             let big_d_ar = r2 + kernel.anti;
-            let i = intensity[j].map(f64::from);
             let vv = [v.x, v.y, v.z];
             if self.use_anti && with_anti {
                 let phi = 1.0 / (big_d_ar * omega);
@@ -170,7 +210,7 @@ impl SweepContext<'_> {
                         + phi_grad[p] * tg[q]
                         + phi * turn_hess[p][q]
                 };
-                let t = [
+                a_t = [
                     turn * phi,
                     grad.x,
                     grad.y,
@@ -182,11 +222,6 @@ impl SweepContext<'_> {
                     hess(1, 2),
                     hess(2, 2),
                 ];
-                for (a, t) in a.iter_mut().zip(t) {
-                    for c in 0..C {
-                        a[c] += t * i[c];
-                    }
-                }
             }
             let r3 = r2 * r;
             let h = 1.0 / (r * big_d);
@@ -247,13 +282,8 @@ impl SweepContext<'_> {
                     t[12 + 6 * p + u] = n;
                 }
             }
-            for (acc, t) in irr.iter_mut().zip(t) {
-                for c in 0..C {
-                    acc[c] += t * i[c];
-                }
-            }
+            (t, a_t)
         }
-        a.map(|x| x.map(|y| y as f32))
     }
 
     /// Adds the fields on element `e`'s path to its front irradiance `h`, its back face's
