@@ -189,6 +189,44 @@ fn a_long_solve_builds_its_pair_cache_late() {
     }
 }
 
+/// The field links' cached terms give the sweeps of the solve that computes them each sweep,
+/// and count in the memory estimate: the 4k-triangle Cornell box with the pair cache's
+/// budget (which the terms share) and without it (0 MB: no cache at all). The cached terms
+/// and pair factors are f32, whose rounding the expansions' cancellations raise to about 1e-5
+/// of a patch's brightest channel.
+#[test]
+fn cached_field_terms_give_the_same_sweeps() {
+    let patches = build_patches(&generated::subdivided_cornell_box(4_000), None);
+    let hidden = Progress::hidden();
+    let prepare = |pair_cache_mb| {
+        let options = SolverOptions {
+            pair_cache_mb,
+            ..SolverOptions::default()
+        };
+        match Prepared::new(&patches, &options, false) {
+            Ok(prepared) => prepared,
+            Err(e) => panic!("the box does not fit: {e}"),
+        }
+    };
+    let (mut cached, mut computed) = (prepare(256), prepare(0));
+    assert!(cached.fields.links > 0, "no field links");
+    assert_eq!(cached.fields.terms.len() as u64, cached.fields.links);
+    assert!(computed.fields.terms.is_empty());
+    assert!(
+        cached.memory.estimate_bytes
+            >= computed.memory.estimate_bytes + cached.fields.terms_bytes()
+    );
+    let (a, _) = cached.solve(&patches, &hidden);
+    let (b, _) = computed.solve(&patches, &hidden);
+    assert_eq!(a.stats.iterations, b.stats.iterations);
+    for (x, y) in a.patch_radiance.iter().zip(&b.patch_radiance) {
+        let scale = y.iter().fold(1e-6f64, |m, v| m.max(v.abs()));
+        for c in 0..3 {
+            assert!((x[c] - y[c]).abs() <= 1e-4 * scale, "{x:?} vs {y:?}");
+        }
+    }
+}
+
 /// A solve whose pair cache did not fit its own budget builds it after
 /// [`crate::solve::MIN_SWEEPS`] sweeps when their contraction predicts at least
 /// [`LATE_PAIR_CACHE_SWEEPS`] more (plain sweeps to a tolerance of 1e-12), and not when it
