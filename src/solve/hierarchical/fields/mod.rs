@@ -20,10 +20,10 @@
 //!   `4 ratio^3` of the link's value at the edge of the node;
 //! - for a flat sender, the receiver's extent is at most [`FIELD_TURN`] times its centroid's
 //!   height above the sender's plane (the sender's cosine, which varies over the receiver, is
-//!   in the field to first order).
+//!   in the field to second order).
 //!
 //! Everything else is gathered per element (the near field). On the seed room the fields
-//! change the result by 0.009% (per-element gather of every link: `field_ratio` 0).
+//! change the result by 0.020% (per-element gather of every link: `field_ratio` 0).
 
 use super::*;
 
@@ -34,14 +34,14 @@ pub(super) const LINK_TERMS: usize = IRR_TERMS + ANTI_TERMS;
 pub(super) const MIN_FIELD_ELEMENTS: u32 = 2;
 
 /// Largest receiver extent, over its centroid's height above a flat sender's plane, of a link
-/// gathered through a field. The sender's cosine varies over the receiver by at most this share
-/// of its value at the centroid, and the field holds it to first order
+/// gathered through a field. The sender's cosine varies linearly over the receiver by at most
+/// this share of its value at the centroid, and the field holds it to second order
 /// ([`crate::hierarchy::links::NodePoint::cosine_ratio`]); at 1 the linear cosine stays
-/// non-negative over the receiver. The rest of such links are gathered per element, with the
-/// exact ratio. The 66k-triangle Cornell box (rms against its path-traced references, the
-/// references' noise removed) and the element-link pairs a sweep evaluates per element: 0.25
-/// 1.254%, 11.6M; 0.5 1.245%, 5.7M; 1 1.242%, 3.7M; 2 1.243%, 2.9M (a closed box's furnace
-/// 2.0031, 2.0040 and 2.0045 at 0.5, 1 and 2, for 2 exactly).
+/// non-negative over the receiver (no element centroid lies behind the sender's plane). The
+/// rest of such links are gathered per element, with the exact ratio. Measured with the cosine
+/// to first order in the fields, the 66k-triangle Cornell box (rms against its path-traced
+/// references, the references' noise removed) and the element-link pairs a sweep evaluates per
+/// element: 0.25 1.254%, 11.6M; 0.5 1.245%, 5.7M; 1 1.242%, 3.7M; 2 1.243%, 2.9M.
 pub(super) const FIELD_TURN: f64 = 1.0;
 
 /// A field link's key: the receiver slabs that see its sender in front (a bit mask) above
