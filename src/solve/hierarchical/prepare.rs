@@ -324,31 +324,30 @@ impl Prepared {
         }
         counts.slots = Some(self.live.slots() as u64);
         self.fields.keep_live(&self.tree, &self.live);
-        // The field links' terms, within what the pair cache left of its budget.
+        // What the model holds: the links' and elements' arrays, the pair cache, the fields
+        // (with their cached terms once kept) and their per-sweep sums.
+        let sweep_sums = (self.fields).sweep_bytes(link_budget.costs.channels() as usize);
         let pair_bytes = self.pairs.as_ref().map_or(0, PairCache::bytes);
-        let held = costs.bytes(&counts)
-            + pair_bytes
-            + self.fields.bytes()
-            + (self.fields).sweep_bytes(link_budget.costs.channels() as usize);
+        let held =
+            |fields: &Fields| costs.bytes(&counts) + pair_bytes + fields.bytes() + sweep_sums;
+        // The field links' terms, within what the pair cache left of its budget.
         let terms_bytes = self.fields.terms_bytes();
-        if terms_bytes > 0 && terms_bytes <= own.saturating_sub(pair_bytes).min(budget.spare(held))
+        if terms_bytes > 0
+            && terms_bytes
+                <= own
+                    .saturating_sub(pair_bytes)
+                    .min(budget.spare(held(&self.fields)))
         {
             let mut fields = std::mem::take(&mut self.fields);
             fields.cache_terms(&self.sweep_context(), &self.links);
             self.fields = fields;
         }
-        let estimate = costs.bytes(&counts)
-            + self.pairs.as_ref().map_or(0, PairCache::bytes)
-            + self.fields.bytes()
-            + self
-                .fields
-                .sweep_bytes(link_budget.costs.channels() as usize);
+        let estimate = held(&self.fields);
         if !budget.fits(estimate) {
             return Err(OverBudget { estimate });
         }
         self.memory.estimate_bytes = estimate;
-        self.state_bytes = costs.state_bytes(&counts)
-            + (self.fields).sweep_bytes(link_budget.costs.channels() as usize);
+        self.state_bytes = costs.state_bytes(&counts) + sweep_sums;
         if cache_dropped {
             self.memory.coarsened.push("pair cache off".into());
         }

@@ -90,6 +90,15 @@ impl SweepContext<'_> {
             .normalize_or_zero()
     }
 
+    /// A flat sender's unit normal and its cosine along cluster link `l`
+    /// ([`Self::link_direction`]); `None` for a curved sender. With the sender's cosine toward
+    /// a point, [`crate::hierarchy::links::cosine_ratio`] turns the link's intensity to it.
+    #[inline]
+    pub(super) fn flat_sender(&self, l: &ClusterLink) -> Option<(DVec3, f64)> {
+        let n_s = self.points[l.sender as usize].flat_normal()?;
+        Some((n_s, n_s.dot(self.link_direction(l))))
+    }
+
     /// What a cluster link gives an element with normal `n_e` at `x_e` and spread `s_e`
     /// ([`crate::hierarchy::links::element_spread`]): irradiance `(cos g - n_r . tilt g^2) / pi`
     /// per unit of the link's intensity, `g = 1 / (d^2 + s)` with the sender's and the
@@ -120,8 +129,7 @@ impl SweepContext<'_> {
         let inv_d = 1.0 / d2.sqrt();
         let cos = -n_e.dot(v) * inv_d;
         let kernel = sender.kernel_toward(v, d2, inv_d);
-        // A flat sender's normal and its cosine along the link (from `pull`'s direction).
-        let flat = (sender.flat_normal()).map(|n_s| (n_s, n_s.dot(self.link_direction(l))));
+        let flat = self.flat_sender(l);
         let turn = flat.map_or(1.0, |(n_s, c_link)| {
             crate::hierarchy::links::cosine_ratio(c_link, n_s.dot(v) * inv_d)
         });

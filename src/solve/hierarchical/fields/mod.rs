@@ -316,7 +316,7 @@ impl Fields {
 
     /// Bytes the cached terms of every field link take ([`Fields::cache_terms`]).
     pub(super) fn terms_bytes(&self) -> u64 {
-        self.links * (LINK_TERMS * 4) as u64 + self.node.len() as u64 * 4
+        self.links * (LINK_TERMS * 4) as u64 + (self.node.len() as u64 + 1) * 4
     }
 
     /// Computes and keeps every field link's terms (`ctx` the sweep context of the prepared

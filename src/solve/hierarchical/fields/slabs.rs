@@ -192,7 +192,7 @@ impl Prepared {
             return NEAR;
         }
         // A flat sender's cosine varies over the receiver by up to its extent over its height
-        // above the sender's plane; the field holds it to first order.
+        // above the sender's plane; the field holds it to second order (`FIELD_TURN`).
         if let Some(n_s) = sender.flat_normal() {
             if !(view.extent <= FIELD_TURN * n_s.dot(rn.centroid - p).abs()) {
                 return NEAR;

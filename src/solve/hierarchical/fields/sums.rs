@@ -150,140 +150,134 @@ impl SweepContext<'_> {
         let omega = self.bins.solid_angle[bin];
         let k = -std::f64::consts::FRAC_1_PI;
         let mut a_t = [0.0f64; ANTI_TERMS];
-        {
-            let link = &links.cluster[j];
-            let sender = &self.points[link.sender as usize];
-            let v = center - sender.centroid();
-            let r2 = v.length_squared();
-            if !(r2 > 0.0) {
-                return ([0.0; IRR_TERMS], a_t);
-            }
-            let r = r2.sqrt();
-            let inv_r = 1.0 / r;
-            let kernel = sender.kernel_toward(v, r2, inv_r);
-            // The sender's cosine toward x over the link's, t(x), at the centre, with its
-            // gradient and Hessian.
-            let (turn, turn_grad, turn_hess) = match sender.flat_normal() {
-                Some(n_s) => {
-                    let w = self.link_direction(link);
-                    let c_link = n_s.dot(w);
-                    let turn = sender.cosine_ratio(w, v * inv_r);
-                    if turn > 0.0 {
-                        let a = n_s.dot(v);
-                        let grad = (n_s - v * (a * inv_r * inv_r)) * (inv_r / c_link);
-                        let scale = inv_r * inv_r * inv_r / c_link;
-                        let (nn, vv) = (n_s.to_array(), v.to_array());
-                        let hess: [[f64; 3]; 3] = std::array::from_fn(|p| {
-                            std::array::from_fn(|q| {
-                                let diagonal = if p == q { a } else { 0.0 };
-                                scale
-                                    * (3.0 * a * vv[p] * vv[q] * inv_r * inv_r
-                                        - diagonal
-                                        - nn[p] * vv[q]
-                                        - vv[p] * nn[q])
-                            })
-                        });
-                        (turn, grad, hess)
-                    } else {
-                        (turn, DVec3::ZERO, [[0.0; 3]; 3])
-                    }
-                }
-                None => (1.0, DVec3::ZERO, [[0.0; 3]; 3]),
-            };
-            let tg = turn_grad.to_array();
-            let spread = kernel.irradiance
-                + receiver.map_or(0.0, |(s_e, n_e)| {
-                    crate::hierarchy::links::receiver_spread(s_e, n_e.dot(v) * inv_r, r2)
-                });
-            let big_d = r2 + spread;
-            let big_d_ar = r2 + kernel.anti;
-            let vv = [v.x, v.y, v.z];
-            if self.use_anti && with_anti {
-                let phi = 1.0 / (big_d_ar * omega);
-                let grad = (v * (-2.0 * phi / big_d_ar)) * turn + turn_grad * phi;
-                let phi_grad = (v * (-2.0 * phi / big_d_ar)).to_array();
-                let hess = |p: usize, q: usize| {
-                    turn * phi
-                        * ((if p == q { -2.0 } else { 0.0 }) + 8.0 * vv[p] * vv[q] / big_d_ar)
-                        / big_d_ar
-                        + tg[p] * phi_grad[q]
-                        + phi_grad[p] * tg[q]
-                        + phi * turn_hess[p][q]
-                };
-                a_t = [
-                    turn * phi,
-                    grad.x,
-                    grad.y,
-                    grad.z,
-                    hess(0, 0),
-                    hess(0, 1),
-                    hess(0, 2),
-                    hess(1, 1),
-                    hess(1, 2),
-                    hess(2, 2),
-                ];
-            }
-            let r3 = r2 * r;
-            let h = 1.0 / (r * big_d);
-            let q = -(3.0 * r2 + spread) / (r3 * big_d * big_d);
-            let dq_over_r = -(6.0 / (r3 * big_d * big_d)
-                - 3.0 * (3.0 * r2 + spread) / (r3 * r2 * big_d * big_d)
-                - 4.0 * (3.0 * r2 + spread) / (r3 * big_d * big_d * big_d));
-            // G, with the sender's tilt term at the centre (`n . G` gains `-n . tilt / (pi
-            // D^2)`; its variation over the field is left out).
-            let g = v * (k * h) + kernel.tilt * (k / (big_d * big_d));
-            let gg = g.to_array();
-            // G's Jacobian, and that of t G: t J + G grad(t)^T.
-            let flat = turn_grad != DVec3::ZERO;
-            let radial: [[f64; 3]; 3] = std::array::from_fn(|p| {
-                std::array::from_fn(|s| k * ((if p == s { h } else { 0.0 }) + q * vv[p] * vv[s]))
-            });
-            let jac: [[f64; 3]; 3] = std::array::from_fn(|p| {
-                std::array::from_fn(|s| turn * radial[p][s] + gg[p] * tg[s])
-            });
-            let sym = |p: usize, s: usize| 0.5 * (jac[p][s] + jac[s][p]);
-            let anti = |p: usize, s: usize| 0.5 * (jac[p][s] - jac[s][p]);
-            let mut t = [0.0f64; IRR_TERMS];
-            // The receiving elements' cross term at the centre (a flat sender's to a flat
-            // receiver's; see `SweepContext::pair_factor`), per unit of the link's intensity;
-            // its variation over the field is left out.
-            let cross = match (sender.flat_normal(), receiver) {
-                (Some(n_s), Some((s_e, n_plane))) if turn > 0.0 => {
-                    let cos_r = -n_plane.dot(v) * inv_r;
-                    let n_r = if cos_r > 0.0 { n_plane } else { -n_plane };
-                    let c_link = n_s.dot(self.link_direction(link));
-                    let weight = crate::hierarchy::links::expansion_weight(r2, s_e);
-                    n_r * (-k * -(weight * s_e * n_s.dot(n_r) * cos_r * cos_r)
-                        / (big_d * big_d * c_link))
-                }
-                _ => DVec3::ZERO,
-            };
-            t[..3].copy_from_slice(&(g * turn + cross).to_array());
-            t[3..9].copy_from_slice(&[
-                sym(0, 0),
-                sym(0, 1),
-                sym(0, 2),
-                sym(1, 1),
-                sym(1, 2),
-                sym(2, 2),
-            ]);
-            t[9..12].copy_from_slice(&[anti(0, 1), anti(0, 2), anti(1, 2)]);
-            // N: t times G's own second derivatives, plus the cosine's terms.
-            let delta = |a: usize, b: usize| if a == b { 1.0 } else { 0.0 };
-            let (tkq, tkr) = (turn * k * q, turn * k * dq_over_r);
-            for p in 0..3 {
-                for (u, &(a, b)) in UPPER.iter().enumerate() {
-                    let mut n = tkq
-                        * (delta(a, b) * vv[p] + delta(p, a) * vv[b] + delta(p, b) * vv[a])
-                        + tkr * vv[p] * vv[a] * vv[b];
-                    if flat {
-                        n += radial[p][a] * tg[b] + radial[p][b] * tg[a] + gg[p] * turn_hess[a][b];
-                    }
-                    t[12 + 6 * p + u] = n;
-                }
-            }
-            (t, a_t)
+        let link = &links.cluster[j];
+        let sender = &self.points[link.sender as usize];
+        let v = center - sender.centroid();
+        let r2 = v.length_squared();
+        if !(r2 > 0.0) {
+            return ([0.0; IRR_TERMS], a_t);
         }
+        let r = r2.sqrt();
+        let inv_r = 1.0 / r;
+        let kernel = sender.kernel_toward(v, r2, inv_r);
+        let vv = [v.x, v.y, v.z];
+        // The sender's cosine toward x over the link's, t(x), at the centre, with its
+        // gradient and Hessian.
+        let flat_sender = self.flat_sender(link);
+        let (turn, turn_grad, turn_hess) = match flat_sender {
+            Some((n_s, c_link)) => {
+                let a = n_s.dot(v);
+                let turn = crate::hierarchy::links::cosine_ratio(c_link, a * inv_r);
+                if turn > 0.0 {
+                    let grad = (n_s - v * (a * inv_r * inv_r)) * (inv_r / c_link);
+                    let scale = inv_r * inv_r * inv_r / c_link;
+                    let nn = n_s.to_array();
+                    let hess: [[f64; 3]; 3] = std::array::from_fn(|p| {
+                        std::array::from_fn(|q| {
+                            let diagonal = if p == q { a } else { 0.0 };
+                            scale
+                                * (3.0 * a * vv[p] * vv[q] * inv_r * inv_r
+                                    - diagonal
+                                    - nn[p] * vv[q]
+                                    - vv[p] * nn[q])
+                        })
+                    });
+                    (turn, grad, hess)
+                } else {
+                    (turn, DVec3::ZERO, [[0.0; 3]; 3])
+                }
+            }
+            None => (1.0, DVec3::ZERO, [[0.0; 3]; 3]),
+        };
+        let tg = turn_grad.to_array();
+        let spread = kernel.irradiance
+            + receiver.map_or(0.0, |(s_e, n_e)| {
+                crate::hierarchy::links::receiver_spread(s_e, n_e.dot(v) * inv_r, r2)
+            });
+        let big_d = r2 + spread;
+        let big_d_ar = r2 + kernel.anti;
+        if self.use_anti && with_anti {
+            let phi = 1.0 / (big_d_ar * omega);
+            let phi_grad = v * (-2.0 * phi / big_d_ar);
+            let grad = phi_grad * turn + turn_grad * phi;
+            let phi_grad = phi_grad.to_array();
+            let hess = |p: usize, q: usize| {
+                turn * phi * ((if p == q { -2.0 } else { 0.0 }) + 8.0 * vv[p] * vv[q] / big_d_ar)
+                    / big_d_ar
+                    + tg[p] * phi_grad[q]
+                    + phi_grad[p] * tg[q]
+                    + phi * turn_hess[p][q]
+            };
+            a_t = [
+                turn * phi,
+                grad.x,
+                grad.y,
+                grad.z,
+                hess(0, 0),
+                hess(0, 1),
+                hess(0, 2),
+                hess(1, 1),
+                hess(1, 2),
+                hess(2, 2),
+            ];
+        }
+        let r3 = r2 * r;
+        let h = 1.0 / (r * big_d);
+        let q = -(3.0 * r2 + spread) / (r3 * big_d * big_d);
+        let dq_over_r = -(6.0 / (r3 * big_d * big_d)
+            - 3.0 * (3.0 * r2 + spread) / (r3 * r2 * big_d * big_d)
+            - 4.0 * (3.0 * r2 + spread) / (r3 * big_d * big_d * big_d));
+        // G, with the sender's tilt term at the centre (`n . G` gains `-n . tilt / (pi
+        // D^2)`; its variation over the field is left out).
+        let g = v * (k * h) + kernel.tilt * (k / (big_d * big_d));
+        let gg = g.to_array();
+        // G's Jacobian, and that of t G: t J + G grad(t)^T.
+        let flat = turn_grad != DVec3::ZERO;
+        let radial: [[f64; 3]; 3] = std::array::from_fn(|p| {
+            std::array::from_fn(|s| k * ((if p == s { h } else { 0.0 }) + q * vv[p] * vv[s]))
+        });
+        let jac: [[f64; 3]; 3] =
+            std::array::from_fn(|p| std::array::from_fn(|s| turn * radial[p][s] + gg[p] * tg[s]));
+        let sym = |p: usize, s: usize| 0.5 * (jac[p][s] + jac[s][p]);
+        let anti = |p: usize, s: usize| 0.5 * (jac[p][s] - jac[s][p]);
+        let mut t = [0.0f64; IRR_TERMS];
+        // The receiving elements' cross term at the centre (a flat sender's to a flat
+        // receiver's; see `SweepContext::pair_factor`), per unit of the link's intensity;
+        // its variation over the field is left out.
+        let cross = match (flat_sender, receiver) {
+            (Some((n_s, c_link)), Some((s_e, n_plane))) if turn > 0.0 => {
+                let cos_r = -n_plane.dot(v) * inv_r;
+                let n_r = if cos_r > 0.0 { n_plane } else { -n_plane };
+                let weight = crate::hierarchy::links::expansion_weight(r2, s_e);
+                n_r * (-k * -(weight * s_e * n_s.dot(n_r) * cos_r * cos_r)
+                    / (big_d * big_d * c_link))
+            }
+            _ => DVec3::ZERO,
+        };
+        t[..3].copy_from_slice(&(g * turn + cross).to_array());
+        t[3..9].copy_from_slice(&[
+            sym(0, 0),
+            sym(0, 1),
+            sym(0, 2),
+            sym(1, 1),
+            sym(1, 2),
+            sym(2, 2),
+        ]);
+        t[9..12].copy_from_slice(&[anti(0, 1), anti(0, 2), anti(1, 2)]);
+        // N: t times G's own second derivatives, plus the cosine's terms.
+        let delta = |a: usize, b: usize| if a == b { 1.0 } else { 0.0 };
+        let (tkq, tkr) = (turn * k * q, turn * k * dq_over_r);
+        for p in 0..3 {
+            for (u, &(a, b)) in UPPER.iter().enumerate() {
+                let mut n = tkq * (delta(a, b) * vv[p] + delta(p, a) * vv[b] + delta(p, b) * vv[a])
+                    + tkr * vv[p] * vv[a] * vv[b];
+                if flat {
+                    n += radial[p][a] * tg[b] + radial[p][b] * tg[a] + gg[p] * turn_hess[a][b];
+                }
+                t[12 + 6 * p + u] = n;
+            }
+        }
+        (t, a_t)
     }
 
     /// Adds the fields on element `e`'s path to its front irradiance `h`, its back face's
