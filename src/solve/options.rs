@@ -75,7 +75,9 @@ pub struct SolverOptions {
     /// and peaked at 4.4 GB. A solve still sweeping after 10 sweeps, or whose first 3 sweeps
     /// predict 10 more, builds the cache then, larger than this if need be, within what the
     /// memory limit leaves: the sweeps that remain pay for it many times over (b90_office, 26
-    /// sweeps: about 550 MB, built after its third).
+    /// sweeps: about 550 MB, built after its third). When the pairs do not fit it at the
+    /// start, near links into large receivers are pushed down into the receivers' children
+    /// where that costs the sweeps less (the 1M-triangle box: 133M pairs a sweep -> 28M).
     pub pair_cache_mb: usize,
     /// Anderson acceleration of the hierarchical solver's sweeps: how many past sweeps each new
     /// state mixes ([`crate::solve::accelerate`]). 0 gives plain Jacobi sweeps with the tail

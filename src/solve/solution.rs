@@ -113,6 +113,10 @@ pub struct SolveStats {
     /// Cluster links of the hierarchical solver gathered through their receiver's field
     /// (summed once per sweep at the receiver node); 0 for the other solvers.
     pub field_links: u64,
+    /// Cluster links of the hierarchical solver that its refinement made into a receiver too
+    /// large for the receiver's field and that were replaced by links into the receiver's
+    /// children, where that costs the sweeps less; 0 for the other solvers.
+    pub pushed_links: u64,
     /// Per sweep of the hierarchical solver: (element, receiver field) evaluations, every
     /// field of an element's node or one of its ancestors; 0 for the other solvers.
     pub field_evaluations: u64,

@@ -12,8 +12,8 @@ use crate::transport::{CouplingParams, Entry};
 mod exact;
 mod traverse;
 
-use traverse::{cluster_link, node_points, sphere_gap, Found};
-pub use traverse::{flat_spread, sender_spread};
+pub use traverse::{cluster_link, flat_spread, sender_spread, silent};
+use traverse::{node_points, sphere_gap, Found};
 
 /// Parameters of link refinement.
 #[derive(Clone, Copy, Debug)]

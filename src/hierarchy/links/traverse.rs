@@ -339,17 +339,7 @@ impl Traversal<'_> {
     /// centroid lies behind every plane below the receiver adds exactly nothing. Such links are
     /// dropped (as culled).
     fn link(&self, (s, r): (u32, u32), found: &mut Found) {
-        let (tree, coupling) = (self.tree, self.coupling);
-        let (sn, rn) = (&tree.nodes[s as usize], &tree.nodes[r as usize]);
-        if !coupling.two_sided
-            && !rn.blocks_back
-            && tree.point_behind_all(
-                sn.centroid,
-                r,
-                crate::geometry::plane_tol(sn.radius + rn.radius),
-                16,
-            )
-        {
+        if silent(self.tree, s, r, self.coupling.two_sided) {
             found.stats.silent_links += 1;
             if self.record_culled {
                 found.culled.push((s, r));
@@ -420,8 +410,23 @@ fn split_pair(
     }
 }
 
+/// True when the cluster link from node `s` to node `r` adds exactly nothing: receivers take
+/// nothing arriving at their back (front-only, neither `two_sided` nor blocking `r`'s back), and
+/// the sender's centroid lies behind every plane below the receiver.
+pub fn silent(tree: &ClusterTree, s: u32, r: u32, two_sided: bool) -> bool {
+    let (sn, rn) = (&tree.nodes[s as usize], &tree.nodes[r as usize]);
+    !two_sided
+        && !rn.blocks_back
+        && tree.point_behind_all(
+            sn.centroid,
+            r,
+            crate::geometry::plane_tol(sn.radius + rn.radius),
+            16,
+        )
+}
+
 /// The cluster link from node `s` to node `r`.
-pub(super) fn cluster_link(tree: &ClusterTree, bins: &Bins, s: u32, r: u32) -> ClusterLink {
+pub fn cluster_link(tree: &ClusterTree, bins: &Bins, s: u32, r: u32) -> ClusterLink {
     let (sn, rn) = (&tree.nodes[s as usize], &tree.nodes[r as usize]);
     let w = (rn.centroid - sn.centroid).normalize_or_zero();
     ClusterLink {

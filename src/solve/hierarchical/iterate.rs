@@ -797,6 +797,7 @@ impl Prepared {
         stats.elements = n;
         (stats.element_link_pairs, stats.pull_terms) = self.sweep_work();
         (stats.field_links, stats.field_evaluations) = (self.fields.links, self.fields.evaluations);
+        stats.pushed_links = self.fields.pushed;
         memory.peak_bytes = crate::memory::peak_rss_bytes();
         stats.memory = Some(memory);
         // The result is checked against the bound of this solve's source (with exact direct

@@ -293,17 +293,21 @@ impl Prepared {
         let pull = links
             .cluster
             .par_iter()
-            .map(|l| {
-                if self.groups.is_grouped(l.sender) {
-                    let (g0, g1) = self.groups.range[l.sender as usize];
-                    (g1 - g0) as u64
-                } else {
-                    let (e0, e1) = tree.nodes[l.sender as usize].elements;
-                    (e1 - e0) as u64
-                }
-            })
+            .map(|l| self.pull_terms(l.sender))
             .sum();
         (pairs, pull)
+    }
+
+    /// The terms a pull from node `s` sums: its sender groups, or its elements when it pulls
+    /// per element.
+    fn pull_terms(&self, s: u32) -> u64 {
+        if self.groups.is_grouped(s) {
+            let (g0, g1) = self.groups.range[s as usize];
+            (g1 - g0) as u64
+        } else {
+            let (e0, e1) = self.tree.nodes[s as usize].elements;
+            (e1 - e0) as u64
+        }
     }
 
     /// Bytes held by tree, links and per-sweep arrays (three channels).

@@ -224,13 +224,13 @@ impl Prepared {
             },
         };
         prepared.fill_elements(patches, two_sided.iter().any(|&b| b));
-        prepared.fields = Fields::build(&mut prepared, options.field_ratio);
         prepared.groups = SenderGroups::build(
             &prepared.tree,
             &prepared.elem_area,
             &prepared.elem_normal,
             &prepared.elem_back,
         );
+        prepared.fields = Fields::build(&mut prepared, options.field_ratio, record_culled);
         prepared.work = prepared.count_sweep_work();
         // Model only what the scene needs: grey albedos allow one-channel solves; a convex
         // enclosure needs no antiradiance; each element stores only the bins links use.

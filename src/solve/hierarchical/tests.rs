@@ -208,7 +208,11 @@ fn cached_field_terms_give_the_same_sweeps() {
             Err(e) => panic!("the box does not fit: {e}"),
         }
     };
-    let (mut cached, mut computed) = (prepare(256), prepare(0));
+    // 8 MB holds the box's pairs but not its field terms: both take the same links
+    // (`fields::push` pushes more when the pairs are not cached).
+    let (mut cached, mut computed) = (prepare(256), prepare(8));
+    assert!(cached.pairs.is_some() && computed.pairs.is_some());
+    assert_eq!(cached.links.cluster.len(), computed.links.cluster.len());
     assert!(cached.fields.links > 0, "no field links");
     assert_eq!(cached.fields.terms.len() as u64, cached.fields.links);
     assert!(computed.fields.terms.is_empty());
@@ -256,4 +260,53 @@ fn a_solve_predicted_long_builds_its_pair_cache_after_its_first_sweeps() {
     };
     assert!(cached_after_min_sweeps(0, 1e-12));
     assert!(!cached_after_min_sweeps(4, 1e-3));
+}
+
+/// Where the pairs are not cached, near links into large receivers are pushed down into their
+/// children when that costs the sweeps less (`fields::push`): every ordered pair of elements
+/// is still covered exactly once, the sweeps evaluate fewer pairs than with the pairs cached
+/// (where pushing seldom pays), and the result stays the per-element gather's.
+#[test]
+fn pushed_links_cover_every_pair_once_and_agree_with_the_per_element_gather() {
+    let patches = build_patches(&generated::subdivided_cornell_box(4_000), None);
+    let hidden = Progress::hidden();
+    let prepare = |pair_cache_mb, field_ratio, record_culled| {
+        let options = SolverOptions {
+            pair_cache_mb,
+            field_ratio,
+            ..SolverOptions::default()
+        };
+        match Prepared::new(&patches, &options, record_culled) {
+            Ok(prepared) => prepared,
+            Err(e) => panic!("the box does not fit: {e}"),
+        }
+    };
+    let mut pushed = prepare(0, 0.3, true);
+    let kept = prepare(256, 0.3, false);
+    assert!(pushed.fields.pushed > kept.fields.pushed, "nothing pushed");
+    assert!(
+        pushed.work.0 < kept.work.0,
+        "{:?} {:?}",
+        pushed.work,
+        kept.work
+    );
+    if let Err(e) = crate::hierarchy::links::validate(&pushed.tree, &pushed.links) {
+        panic!("pushed links: {e}");
+    }
+    let (a, _) = pushed.solve(&patches, &hidden);
+    let (b, _) = prepare(0, 0.0, false).solve(&patches, &hidden);
+    assert_eq!(b.stats.field_links, 0);
+    let (mut num, mut den) = (0.0, 0.0);
+    for ((x, y), area) in a
+        .patch_radiance
+        .iter()
+        .zip(&b.patch_radiance)
+        .zip(&patches.area)
+    {
+        for c in 0..3 {
+            num += area * (x[c] - y[c]).abs();
+            den += area * y[c].abs();
+        }
+    }
+    assert!(num <= 0.003 * den, "{:.3}%", 100.0 * num / den);
 }

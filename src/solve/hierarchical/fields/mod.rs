@@ -49,6 +49,7 @@ pub(super) const FIELD_TURN: f64 = 1.0;
 const MASK_SHIFT: u32 = 16;
 const NEAR: u32 = u32::MAX;
 
+mod push;
 mod slabs;
 mod sums;
 
@@ -112,6 +113,8 @@ pub(super) struct Fields {
     pub(super) term_start: Vec<u32>,
     /// Links gathered through fields.
     pub(super) links: u64,
+    /// Near links replaced by links into their receivers' children ([`push`]).
+    pub(super) pushed: u64,
     /// (element, field) evaluations per sweep.
     pub(super) evaluations: u64,
 }
@@ -130,13 +133,14 @@ impl Fields {
     /// Sorts every node's links into near ones (first, in their order) and field ones (after,
     /// by key), and lays out the fields, for receivers of at most `ratio` times their distance
     /// from the sender (0: no fields). Reorders `links.cluster` within each node.
-    pub(super) fn build(prepared: &mut Prepared, ratio: f64) -> Fields {
+    pub(super) fn build(prepared: &mut Prepared, ratio: f64, record_culled: bool) -> Fields {
         let n = prepared.element_count();
         if !(ratio > 0.0) || prepared.links.cluster.is_empty() {
             return Fields::none(&prepared.links, n);
         }
         let nodes = prepared.tree.nodes.len();
         let keys = prepared.field_keys(ratio);
+        let (keys, pushed) = prepared.push_near_links(keys, ratio, record_culled);
         let links = &mut prepared.links;
         let mut keyed: Vec<(u32, ClusterLink)> =
             keys.into_iter().zip(links.cluster.drain(..)).collect();
@@ -145,6 +149,7 @@ impl Fields {
             .for_each(|part| part.sort_by_key(|&(k, l)| (k != NEAR, k, l.sender)));
         let mut fields = Fields {
             near_end: Vec::with_capacity(nodes),
+            pushed,
             ..Fields::default()
         };
         let mut field_of = vec![NONE; nodes];

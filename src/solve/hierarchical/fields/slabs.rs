@@ -180,7 +180,7 @@ impl Prepared {
     /// The key of cluster link `l` when it can be gathered through its receiver's field
     /// (`view`: extent at most `ratio` times its distance from the sender, the sender on one
     /// side of every element of each slab), or [`NEAR`].
-    fn field_key(&self, l: &ClusterLink, view: &ReceiverView, ratio: f64) -> u32 {
+    pub(super) fn field_key(&self, l: &ClusterLink, view: &ReceiverView, ratio: f64) -> u32 {
         let rn = &self.tree.nodes[l.receiver as usize];
         if view.extent <= 0.0 {
             return NEAR;
