@@ -330,16 +330,14 @@ impl Prepared {
         let pair_bytes = self.pairs.as_ref().map_or(0, PairCache::bytes);
         let held =
             |fields: &Fields| costs.bytes(&counts) + pair_bytes + fields.bytes() + sweep_sums;
-        // The field links' terms, within what the pair cache left of its budget.
-        let terms_bytes = self.fields.terms_bytes();
-        if terms_bytes > 0
-            && terms_bytes
-                <= own
-                    .saturating_sub(pair_bytes)
-                    .min(budget.spare(held(&self.fields)))
-        {
+        // The field links' terms, as many fields' as fit what the pair cache left of its
+        // budget.
+        let terms_budget = own
+            .saturating_sub(pair_bytes)
+            .min(budget.spare(held(&self.fields)));
+        if self.fields.links > 0 && terms_budget > 0 {
             let mut fields = std::mem::take(&mut self.fields);
-            fields.cache_terms(&self.sweep_context(), &self.links);
+            fields.cache_terms(&self.sweep_context(), &self.links, terms_budget);
             self.fields = fields;
         }
         let estimate = held(&self.fields);

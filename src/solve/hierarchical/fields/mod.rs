@@ -105,11 +105,11 @@ pub(super) struct Fields {
     /// (`elem_slab[elem_slab_start[e] ..]`).
     pub(super) elem_slab: Vec<u8>,
     pub(super) elem_slab_start: Vec<u32>,
-    /// Per field link, its terms per unit of its intensity (irradiance, then antiradiance),
-    /// when they fit the pair cache's budget ([`Fields::cache_terms`]); empty otherwise (each
-    /// sweep computes them again).
+    /// Per field link of the first fields, its terms per unit of its intensity (irradiance,
+    /// then antiradiance), as many fields as fit what the pair cache's budget leaves
+    /// ([`Fields::cache_terms`]); each sweep computes the other fields' terms again.
     pub(super) terms: Vec<[f32; LINK_TERMS]>,
-    /// Per field: the index in `terms` of its first link.
+    /// Per cached field, and one past the last: the index in `terms` of its first link.
     pub(super) term_start: Vec<u32>,
     /// Links gathered through fields.
     pub(super) links: u64,
@@ -314,27 +314,35 @@ impl Fields {
             + self.group_mask.len() * (2 + 4)
             + self.slot_key.len() * (4 + 4 + 4)
             + self.of_element.len() * 8
-            + self.elem_slab.len()
-            + self.terms.len() * LINK_TERMS * 4
-            + self.term_start.len() * 4) as u64
+            + self.elem_slab.len()) as u64
+            + self.cached_terms_bytes()
     }
 
-    /// Bytes the cached terms of every field link take ([`Fields::cache_terms`]).
-    pub(super) fn terms_bytes(&self) -> u64 {
-        self.links * (LINK_TERMS * 4) as u64 + (self.node.len() as u64 + 1) * 4
+    /// Bytes the cached terms take ([`Fields::cache_terms`]).
+    pub(super) fn cached_terms_bytes(&self) -> u64 {
+        (self.terms.len() * LINK_TERMS * 4 + self.term_start.len() * 4) as u64
     }
 
-    /// Computes and keeps every field link's terms (`ctx` the sweep context of the prepared
-    /// scene whose fields these are): a sweep then sums each field's links as a stream of
-    /// multiply-adds instead of their geometry. Call after [`Fields::keep_live`] (a slot
-    /// without antiradiance sums caches none).
-    pub(super) fn cache_terms(&mut self, ctx: &SweepContext, links: &Links) {
+    /// Computes and keeps the terms of every field link of the first fields whose terms fit
+    /// `budget` bytes (all of them when they fit; `ctx` the sweep context of the prepared scene
+    /// whose fields these are): a sweep then sums those fields' links as a stream of
+    /// multiply-adds instead of their geometry, and computes the rest as before. Call after
+    /// [`Fields::keep_live`] (a slot without antiradiance sums caches none).
+    pub(super) fn cache_terms(&mut self, ctx: &SweepContext, links: &Links, budget: u64) {
+        let per_link = (LINK_TERMS * 4) as u64;
         let mut start = Vec::with_capacity(self.node.len() + 1);
         let mut total = 0u32;
         for f in 0..self.node.len() {
-            start.push(total);
             let node = self.node[f] as usize;
-            total += links.cluster_start[node + 1] - self.near_end[node];
+            let count = links.cluster_start[node + 1] - self.near_end[node];
+            if u64::from(total + count) * per_link + (f as u64 + 2) * 4 > budget {
+                break;
+            }
+            start.push(total);
+            total += count;
+        }
+        if start.is_empty() {
+            return;
         }
         start.push(total);
         let mut terms = vec![[0.0f32; LINK_TERMS]; total as usize];

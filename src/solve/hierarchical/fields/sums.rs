@@ -102,7 +102,7 @@ impl SweepContext<'_> {
         with_anti: bool,
     ) -> [[f32; C]; ANTI_TERMS] {
         let mut a = [[0.0f64; C]; ANTI_TERMS];
-        let cached = !fields.terms.is_empty();
+        let cached = f + 1 < fields.term_start.len();
         let first = fields.near_end[fields.node[f] as usize] as usize;
         for j in fields.slot_links(f, s) {
             let i = intensity[j].map(f64::from);
