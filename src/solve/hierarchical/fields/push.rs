@@ -27,6 +27,10 @@ const FIELD_TERM_COST: f64 = 2.0;
 /// A link that [`Prepared::push_near_links`] drops: pushed below its receiver, or silent.
 const PUSHED: u32 = NEAR - 1;
 
+/// Most receiver views one node's push keeps at once (about 0.8 kB each); beyond, they are
+/// dropped and found again as needed.
+const MAX_VIEWS: usize = 4096;
+
 /// The fixed inputs of one push.
 struct Push<'a> {
     prepared: &'a Prepared,
@@ -77,7 +81,7 @@ impl Push<'_> {
                 return pull + FIELD_TERM_COST;
             }
         }
-        let near = pull + count as f64 * self.pair;
+        let near = self.near(pull, count);
         if node.is_leaf() || count < PUSH_ELEMENTS {
             out.push((NEAR, link));
             return near;
@@ -90,6 +94,12 @@ impl Push<'_> {
         out.truncate(mark);
         out.push((NEAR, link));
         near
+    }
+
+    /// What a sweep spends on a link gathered per element of a receiver of `count` elements,
+    /// its pull costing `pull`.
+    fn near(&self, pull: f64, count: u32) -> f64 {
+        pull + f64::from(count) * self.pair
     }
 
     /// [`Push::best`] summed over the children of node `r`.
@@ -161,9 +171,12 @@ impl Prepared {
                         continue;
                     }
                     let pull = PULL_TERM_COST * push.prepared.pull_terms(l.sender) as f64;
-                    let near = pull + count as f64 * push.pair;
+                    if views.len() > MAX_VIEWS {
+                        views.clear();
+                    }
                     let mark = found.len();
-                    if push.children(l.sender, i as u32, pull, &mut views, &mut found) < near {
+                    let pushed = push.children(l.sender, i as u32, pull, &mut views, &mut found);
+                    if pushed < push.near(pull, count) {
                         *k = PUSHED;
                     } else {
                         found.truncate(mark);
