@@ -31,6 +31,9 @@ const PUSHED: u32 = NEAR - 1;
 /// dropped and found again as needed.
 const MAX_VIEWS: usize = 4096;
 
+/// The receiver views one node's push has found, by node.
+type Views = std::collections::HashMap<u32, ReceiverView>;
+
 /// The fixed inputs of one push.
 struct Push<'a> {
     prepared: &'a Prepared,
@@ -52,7 +55,7 @@ impl Push<'_> {
         sender: u32,
         r: u32,
         pull: f64,
-        views: &mut std::collections::HashMap<u32, ReceiverView>,
+        views: &mut Views,
         out: &mut Vec<(u32, ClusterLink)>,
     ) -> f64 {
         let p = self.prepared;
@@ -108,7 +111,7 @@ impl Push<'_> {
         sender: u32,
         r: u32,
         pull: f64,
-        views: &mut std::collections::HashMap<u32, ReceiverView>,
+        views: &mut Views,
         out: &mut Vec<(u32, ClusterLink)>,
     ) -> f64 {
         let node = &self.prepared.tree.nodes[r as usize];
@@ -164,7 +167,7 @@ impl Prepared {
                     return found.into_iter();
                 }
                 // The views of the nodes below, which every near link into the node visits.
-                let mut views = std::collections::HashMap::new();
+                let mut views = Views::new();
                 let start = links.cluster_start[i] as usize;
                 for (k, l) in out.iter_mut().zip(&links.cluster[start..]) {
                     if *k != NEAR {
