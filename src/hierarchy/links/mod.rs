@@ -652,6 +652,17 @@ mod kernel_tests {
         sum / (std::f64::consts::PI * cos_link)
     }
 
+    /// A flat unit disk at the origin with normal `normal`: spread `a^2` = 1 (twice its mean
+    /// square 1/2).
+    fn unit_disk(normal: [f32; 3]) -> NodePoint {
+        NodePoint {
+            centroid: [0.0; 3],
+            spread: 1.0,
+            disk_spread: 1.0,
+            normal,
+        }
+    }
+
     /// The solver's value for the same pair: `cos_r / (d^2 + s) - n_r . tilt / (d^2 + s)^2`.
     fn kernel_value(x: DVec3, n_r: DVec3, disk: &NodePoint) -> f64 {
         let d2 = x.length_squared();
@@ -663,13 +674,7 @@ mod kernel_tests {
 
     #[test]
     fn an_oblique_disk_sends_what_its_form_factor_says() {
-        // A unit disk: spread a^2 = 1 (twice its mean square 1/2).
-        let disk = NodePoint {
-            centroid: [0.0; 3],
-            spread: 1.0,
-            disk_spread: 1.0,
-            normal: [0.0, 0.0, 1.0],
-        };
+        let disk = unit_disk([0.0, 0.0, 1.0]);
         for degrees in [0.0f64, 40.0, 70.0] {
             let t = degrees.to_radians();
             let x = DVec3::new(t.sin(), 0.0, t.cos()) * 3.0;
@@ -700,12 +705,7 @@ mod kernel_tests {
         assert_eq!(expansion_weight(3.0, 1.0), 0.0);
         assert_eq!(expansion_weight(6.0, 1.0), 0.5);
         assert_eq!(expansion_weight(9.0, 1.0), 1.0);
-        let disk = NodePoint {
-            centroid: [0.0; 3],
-            spread: 1.0,
-            disk_spread: 1.0,
-            normal: [0.0, 0.0, 1.0],
-        };
+        let disk = unit_disk([0.0, 0.0, 1.0]);
         // Grazing and within twice its radius: no negative spread, no tilt.
         let x = DVec3::new(1.5, 0.0, 0.1);
         let k = disk.kernel_toward(x, x.length_squared(), 1.0 / x.length());
@@ -714,12 +714,7 @@ mod kernel_tests {
 
     #[test]
     fn a_flat_senders_light_is_turned_to_each_points_own_cosine() {
-        let flat = NodePoint {
-            centroid: [0.0; 3],
-            spread: 1.0,
-            disk_spread: 1.0,
-            normal: [0.0, 0.0, -1.0],
-        };
+        let flat = unit_disk([0.0, 0.0, -1.0]);
         let curved = NodePoint {
             normal: [0.0; 3],
             ..flat

@@ -43,7 +43,7 @@ impl PairCache {
             .map(|e| near_links_into_ancestors(tree, links, &prepared.fields, e))
             .collect();
         let total: usize = counts.iter().sum();
-        let bytes = (total * std::mem::size_of::<[f32; 2]>() + (n + 1) * 8) as u64;
+        let bytes = PairCache::factor_bytes(total as u64, n);
         if bytes > budget {
             return Err(bytes);
         }
@@ -104,6 +104,12 @@ impl PairCache {
     }
 
     /// Bytes held.
+    /// Bytes of the factors of `pairs` (element, cluster link) pairs over `elements`
+    /// elements, with their starts: what [`PairCache::build`] holds its budget against.
+    pub(super) fn factor_bytes(pairs: u64, elements: usize) -> u64 {
+        pairs * std::mem::size_of::<[f32; 2]>() as u64 + (elements as u64 + 1) * 8
+    }
+
     pub(super) fn bytes(&self) -> u64 {
         (self.start.len() * 8
             + self.ranges.len() * 8

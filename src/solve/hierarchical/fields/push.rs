@@ -145,7 +145,7 @@ impl Prepared {
                 out.iter().filter(|&&k| k == NEAR).count() as u64 * u64::from(e1 - e0)
             })
             .sum();
-        let cached = near_pairs * std::mem::size_of::<[f32; 2]>() as u64
+        let cached = PairCache::factor_bytes(near_pairs, self.element_count())
             <= self.options.pair_cache_mb as u64 * 1_000_000;
         let push = Push {
             prepared: self,
@@ -204,23 +204,13 @@ impl Prepared {
         added.par_sort_by_key(|&(_, l)| l.receiver);
         // Per receiver node in node order: the links that stay, then the pushed ones.
         let nodes = links.cluster_start.len() - 1;
-        let mut count = vec![0u32; nodes];
-        for (i, c) in count.iter_mut().enumerate() {
-            let (a, b) = (
-                links.cluster_start[i] as usize,
-                links.cluster_start[i + 1] as usize,
-            );
-            *c = keys[a..b].iter().filter(|&&k| k != PUSHED).count() as u32;
-        }
-        for &(_, l) in &added {
-            count[l.receiver as usize] += 1;
-        }
-        let start = starts_of(count.into_iter());
-        let total = start.last().map_or(0, |&t| t as usize);
+        let total = keys.len() - moved as usize + added.len();
+        let mut start = Vec::with_capacity(nodes + 1);
         let mut new_keys = Vec::with_capacity(total);
         let mut new_links = Vec::with_capacity(total);
         let mut next = added.into_iter().peekable();
         for i in 0..nodes {
+            start.push(new_links.len() as u32);
             let (a, b) = (
                 links.cluster_start[i] as usize,
                 links.cluster_start[i + 1] as usize,
@@ -236,6 +226,7 @@ impl Prepared {
                 new_links.push(l);
             }
         }
+        start.push(new_links.len() as u32);
         links.cluster = new_links;
         links.cluster_start = start;
         (new_keys, moved)
