@@ -10,6 +10,15 @@ Python 3 standard library only. Used by docs/mesh_quality.sh; also usable on its
         radiance back to the original triangles through the map. With "-" for the map the
         two CSVs are of the same triangles: the error of a solve against a reference.
 
+    mesh_quality.py common ORIGINAL.csv VARIANT.csv VARIANT.map.csv
+        prints the same measure at the resolution the two meshes share: the original and variant
+        triangles that overlap (through the map, on the original's side) are joined into groups,
+        and each group's area-weighted mean radiance is compared. Where the variant refines the
+        original (fan, tjunction, jitter) each group is one original triangle and the two
+        measures agree; where it coarsens it (huge-tiny: one triangle for many originals) a
+        group holds what both can resolve, and the difference no longer counts the
+        resolution the variant gave up.
+
     mesh_quality.py table RUNS.tsv
         prints one markdown table of the runs listed in RUNS.tsv (tab-separated, no header:
         scene, variant, status, variant OBJ, report JSON, triangles CSV, map CSV or "-"); the
@@ -113,6 +122,54 @@ def difference(original_csv, variant_csv, map_csv):
     return relative_error(original, map_back(mapping, len(original), variant))
 
 
+def common_difference(original_csv, variant_csv, map_csv):
+    """The variant's difference from the original on the groups of triangles that overlap
+    (connected through the map): per group and channel, the original's area-weighted mean over
+    its non-emissive triangles against the variant's over its overlaps with them, weighted by
+    the group's original area; summed and divided as in `relative_error`."""
+    original = read_triangles(original_csv)
+    variant = read_triangles(variant_csv)
+    mapping = [m for m in read_map(map_csv) if m[3]]
+    parent = list(range(len(original) + len(variant)))
+
+    def find(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for v, o, _, _ in mapping:
+        a, b = find(o), find(len(original) + v)
+        if a != b:
+            parent[a] = b
+    # Per group: original area, original sums, overlap area, variant sums.
+    groups = {}
+    for o, (a, emissive, b) in enumerate(original):
+        if emissive:
+            continue
+        g = groups.setdefault(find(o), [0.0, [0.0] * 3, 0.0, [0.0] * 3])
+        g[0] += a
+        for c in range(3):
+            g[1][c] += a * b[c]
+    for v, o, a, _ in mapping:
+        if original[o][1]:
+            continue
+        g = groups[find(o)]
+        g[2] += a
+        for c in range(3):
+            g[3][c] += a * variant[v][2][c]
+    total, channels = 0.0, 0
+    for c in range(3):
+        num = sum(
+            abs((g[3][c] / g[2] if g[2] > 0 else 0.0) * g[0] - g[1][c]) for g in groups.values()
+        )
+        den = sum(g[1][c] for g in groups.values())
+        if den > 0:
+            total += num / den
+            channels += 1
+    return total / channels if channels else 0.0
+
+
 def count_faces(obj):
     """Triangles of an OBJ file after fan triangulation."""
     n = 0
@@ -147,14 +204,15 @@ def table(runs_tsv):
                 rows.append(line.rstrip("\n").split("\t"))
     print(
         "| scene | variant | input triangles | time (s) | links | links / input triangle "
-        "| time ratio | links ratio | peak memory (MB) | difference from original |"
+        "| time ratio | links ratio | peak memory (MB) | difference from original "
+        "| at the common resolution |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     base = {}
     for scene, variant, status, obj, report, triangles, mapping in rows:
         n = count_faces(obj)
         if status != "ok":
-            print(f"| {scene} | {variant} | {n if n is not None else '-'} | {status} | | | | | | |")
+            print(f"| {scene} | {variant} | {n if n is not None else '-'} | {status} | | | | | | | |")
             continue
         with open(report) as f:
             r = json.load(f)
@@ -166,27 +224,30 @@ def table(runs_tsv):
             base[scene] = (t, links, triangles)
         ref = base.get(scene)
         if ref is None:
-            ratios, diff = ("-", "-"), "-"
+            ratios, diff, common = ("-", "-"), "-", "-"
         else:
             ratios = (fmt(t / ref[0]) if ref[0] > 0 else "-", fmt(links / ref[1]) if ref[1] else "-")
             if variant == "original":
-                diff = "0"
+                diff = common = "0"
             elif mapping == "-":
-                diff = "-"
+                diff = common = "-"
             else:
                 try:
                     diff = f"{100 * difference(ref[2], triangles, mapping):.3f}%"
+                    common = f"{100 * common_difference(ref[2], triangles, mapping):.3f}%"
                 except (OSError, ValueError, IndexError, KeyError) as e:
-                    diff = f"failed: {e}"
+                    diff = common = f"failed: {e}"
         print(
             f"| {scene} | {variant} | {n} | {fmt(t)} | {links} | {fmt(links / n)} | "
-            f"{ratios[0]} | {ratios[1]} | {fmt(peak / 1e6) if peak else '-'} | {diff} |"
+            f"{ratios[0]} | {ratios[1]} | {fmt(peak / 1e6) if peak else '-'} | {diff} | {common} |"
         )
 
 
 def main(argv):
     if len(argv) == 5 and argv[1] == "error":
         print(f"{difference(argv[2], argv[3], argv[4]):.6g}")
+    elif len(argv) == 5 and argv[1] == "common" and argv[4] != "-":
+        print(f"{common_difference(argv[2], argv[3], argv[4]):.6g}")
     elif len(argv) == 3 and argv[1] == "table":
         table(argv[2])
     else:

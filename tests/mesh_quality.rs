@@ -798,3 +798,73 @@ fn classroom_and_office_are_deterministic() {
         }
     }
 }
+
+/// `docs/mesh_quality.py` on a strip of two original triangles (radiance 1 and 3, area 1 each):
+/// `error` compares per original triangle, `common` on the groups the map joins. Skipped when
+/// python3 is absent.
+#[test]
+fn mesh_quality_script_compares_a_coarsened_variant_at_the_common_resolution() {
+    let dir = tempfile::tempdir().unwrap();
+    let write = |name: &str, text: &str| {
+        let path = dir.path().join(name);
+        std::fs::write(&path, text).unwrap();
+        path
+    };
+    let original = write(
+        "original.csv",
+        "index,area,emissive,r,g,b\n0,1,0,1,1,1\n1,1,0,3,3,3\n",
+    );
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/mesh_quality.py");
+    let measure = |how: &str, variant: &Path, map: &Path| -> Option<f64> {
+        let out = std::process::Command::new("python3")
+            .arg(&script)
+            .args([how])
+            .args([&original, variant, map])
+            .output()
+            .ok()?;
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        Some(
+            String::from_utf8(out.stdout)
+                .unwrap()
+                .trim()
+                .parse()
+                .unwrap(),
+        )
+    };
+    // Coarsened: one variant triangle over both originals, at their mean (2).
+    let coarse = write("coarse.csv", "index,area,emissive,r,g,b\n0,2,0,2,2,2\n");
+    let coarse_map = write(
+        "coarse.map.csv",
+        "variant_index,original_index,area,facing\n0,0,1,1\n0,1,1,1\n",
+    );
+    let Some(per_triangle) = measure("error", &coarse, &coarse_map) else {
+        eprintln!("skipped: python3 not found");
+        return;
+    };
+    // |2 - 1| + |2 - 3| over 1 + 3.
+    assert!((per_triangle - 0.5).abs() < 1e-9, "{per_triangle}");
+    let common = measure("common", &coarse, &coarse_map).unwrap();
+    assert!(common.abs() < 1e-12, "{common}");
+    // Refined: each original cut in two, one piece of the second 10% off; both measures agree.
+    let fine = write(
+        "fine.csv",
+        "index,area,emissive,r,g,b\n0,0.5,0,1,1,1\n1,0.5,0,1,1,1\n2,0.5,0,3,3,3\n3,0.5,0,3.3,3.3,3.3\n",
+    );
+    let fine_map = write(
+        "fine.map.csv",
+        "variant_index,original_index,area,facing\n0,0,0.5,1\n1,0,0.5,1\n2,1,0.5,1\n3,1,0.5,1\n",
+    );
+    let (a, b) = (
+        measure("error", &fine, &fine_map).unwrap(),
+        measure("common", &fine, &fine_map).unwrap(),
+    );
+    // |3.15 - 3| over 4.
+    assert!(
+        (a - 0.0375).abs() < 1e-9 && (b - a).abs() < 1e-12,
+        "{a} {b}"
+    );
+}
