@@ -5,8 +5,8 @@ use std::path::Path;
 
 use antiradiance::mesh::{build_patches, Patches};
 use antiradiance::output::render::{
-    render_png, render_rgb, render_rgb_shaded, resolve_view, tone_map, CameraOptions, Shading,
-    BACK_FACE_RGB,
+    render_png, render_rgb, render_rgb_shaded, resolve_view, tone_map, CameraOptions, Raster,
+    Shading, BACK_FACE_RGB,
 };
 use antiradiance::output::{
     read_triangles_csv, write_json, write_ply, write_triangles_csv, TRIANGLES_CSV_HEADER,
@@ -422,6 +422,58 @@ fn png_lit_square_in_front_of_camera() {
     assert_eq!(info.bit_depth, png::BitDepth::Eight);
     assert_eq!(&buf[..info.buffer_size()], &img[..]);
     assert!(dir_is_empty_but(dir.path(), "img.png"));
+}
+
+/// A raster made once shades any solution as a fresh flat render does (the colours it keeps per
+/// patch are per call), and shows a two-sided patch seen from behind in its back face's B.
+#[test]
+fn one_raster_shades_every_frame_as_a_fresh_render() {
+    let scene = square_scene(false);
+    let mut patches = build_patches(&scene, None);
+    // The first triangle two-sided: seen from behind it shows its back face's radiance, the
+    // second its back side in dark grey.
+    patches.two_sided = vec![true, false];
+    let behind = CameraOptions {
+        eye: Some(v(0.0, 0.0, -5.0)),
+        ..front_camera()
+    };
+    for camera in [front_camera(), behind] {
+        let raster = Raster::new(&patches, &camera);
+        for k in [1.0, 3.0] {
+            let mut solution = Solution::from_normalized(
+                &patches,
+                &[[0.5 * k, 0.25, 0.1], [0.2, 0.4 * k, 0.1]],
+                SolveStats::default(),
+            );
+            solution.patch_radiance_back = vec![[0.1, 0.2 * k, 0.3], [0.0; 3]];
+            for exposure in [None, Some(2.0)] {
+                let fresh = render_rgb(
+                    &patches,
+                    &solution,
+                    &CameraOptions {
+                        exposure,
+                        ..camera.clone()
+                    },
+                );
+                assert_eq!(
+                    raster.rgb(&patches, &solution, exposure),
+                    fresh,
+                    "k {k}, {exposure:?}"
+                );
+            }
+            let img = raster.rgb(&patches, &solution, Some(1.0));
+            let colours: Vec<[u8; 3]> = img.chunks(3).map(|p| [p[0], p[1], p[2]]).collect();
+            let (back, grey) = (
+                tone_map(solution.patch_radiance_back[0], 1.0),
+                colours.contains(&BACK_FACE_RGB),
+            );
+            if camera.eye == Some(v(0.0, 0.0, -5.0)) {
+                assert!(colours.contains(&back) && grey, "from behind: {back:?}");
+            } else {
+                assert!(!grey && colours.contains(&tone_map(solution.patch_radiance[1], 1.0)));
+            }
+        }
+    }
 }
 
 #[test]

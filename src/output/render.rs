@@ -499,6 +499,16 @@ struct View {
     height: u32,
 }
 
+/// How patch `p` is seen from `eye` (world units): (drawn as a front, showing its back face).
+/// A two-sided patch seen from behind shows its back face, lit as a front; a one-sided one
+/// shows its back side (drawn in [`BACK_FACE_RGB`]).
+fn sides_seen(patches: &Patches, p: usize, eye: DVec3) -> (bool, bool) {
+    let corner = patches.frame.world_from_unit(patches.corners[p][0]);
+    let facing = patches.normal[p].dot(eye - corner) > 0.0;
+    let back_face = !facing && patches.is_two_sided(p);
+    (facing || back_face, back_face)
+}
+
 /// Rasterizes the patches as seen in `view`; `welded` gives smooth per-corner radiance.
 fn rasterize(patches: &Patches, solution: &Solution, welded: Option<&Welded>, view: View) -> Frame {
     let View {
@@ -522,10 +532,7 @@ fn rasterize(patches: &Patches, solution: &Solution, welded: Option<&Welded>, vi
             continue; // zero area: nothing to draw
         }
         let world = patches.corners[p].map(|c| patches.frame.world_from_unit(c));
-        let facing = patches.normal[p].dot(eye - world[0]) > 0.0;
-        // A two-sided patch seen from behind shows its back face, lit as a front (flat).
-        let back_face = !facing && patches.is_two_sided(p);
-        let front = facing || back_face;
+        let (front, back_face) = sides_seen(patches, p, eye);
         let b = if back_face {
             solution
                 .patch_radiance_back
@@ -699,8 +706,11 @@ pub fn render_rgb_shaded(
     if width == 0 || height == 0 {
         return Vec::new();
     }
+    if shading == Shading::Flat {
+        return Raster::new(patches, camera).rgb(patches, solution, camera.exposure);
+    }
     let (eye, target) = resolve_view(patches, camera);
-    let welded = (shading == Shading::Smooth).then(|| weld(patches, solution));
+    let welded = weld(patches, solution);
     let view = View {
         eye,
         target,
@@ -708,17 +718,33 @@ pub fn render_rgb_shaded(
         width,
         height,
     };
-    let frame = rasterize(patches, solution, welded.as_ref(), view);
-    let exposure = camera
-        .exposure
+    let frame = rasterize(patches, solution, Some(&welded), view);
+    tone_pixels(
+        patches,
+        (&frame.patch, &frame.front),
+        &frame.radiance,
+        camera.exposure,
+    )
+}
+
+/// The RGB8 pixels of a rasterized picture: black where `patch` is [`NO_PATCH`], front sides
+/// tone-mapped from `radiance` ([`tone_map`], with `exposure` when it is finite and > 0, else
+/// [`frame_exposure`]'s), back sides in [`BACK_FACE_RGB`].
+fn tone_pixels(
+    patches: &Patches,
+    (patch, front): (&[u32], &[bool]),
+    radiance: &[[f64; 3]],
+    exposure: Option<f64>,
+) -> Vec<u8> {
+    let exposure = exposure
         .filter(|e| e.is_finite() && *e > 0.0)
-        .unwrap_or_else(|| frame_exposure(patches, &frame));
-    let mut rgb = Vec::with_capacity(frame.patch.len() * 3);
-    for i in 0..frame.patch.len() {
-        let pixel = if frame.patch[i] == NO_PATCH {
+        .unwrap_or_else(|| frame_exposure(patches, (patch, front), radiance));
+    let mut rgb = Vec::with_capacity(patch.len() * 3);
+    for i in 0..patch.len() {
+        let pixel = if patch[i] == NO_PATCH {
             [0; 3]
-        } else if frame.front[i] {
-            tone_map(frame.radiance[i], exposure)
+        } else if front[i] {
+            tone_map(radiance[i], exposure)
         } else {
             BACK_FACE_RGB
         };
@@ -727,17 +753,141 @@ pub fn render_rgb_shaded(
     rgb
 }
 
+/// The pixels of one view with flat shading: which patch each shows and from which side. The
+/// view depends on the geometry only, so an animation whose light changes rasterizes once and
+/// shades every frame from it ([`Raster::rgb`], [`Raster::write_png`]): on the seed room at
+/// 400 x 300 the rasterization is most of a picture's time.
+pub struct Raster {
+    width: u32,
+    height: u32,
+    /// Per pixel, the patch it shows ([`NO_PATCH`]: none).
+    patch: Vec<u32>,
+    /// Per pixel, true when it shows a front (or a two-sided patch's back face).
+    front: Vec<bool>,
+    /// Per patch, true when it shows its back face (two-sided, seen from behind).
+    back_face: Vec<bool>,
+}
+
+impl Raster {
+    /// Rasterizes `patches` as `camera` sees them (its eye and target, or the automatic view
+    /// of [`resolve_view`]); a zero width or height gives an empty raster.
+    pub fn new(patches: &Patches, camera: &CameraOptions) -> Raster {
+        let (width, height) = (camera.width, camera.height);
+        if width == 0 || height == 0 {
+            return Raster {
+                width,
+                height,
+                patch: Vec::new(),
+                front: Vec::new(),
+                back_face: Vec::new(),
+            };
+        }
+        let (eye, target) = resolve_view(patches, camera);
+        let view = View {
+            eye,
+            target,
+            fov_deg: camera.fov_deg,
+            width,
+            height,
+        };
+        let frame = rasterize(patches, &Solution::default(), None, view);
+        let back_face = (0..patches.len())
+            .map(|p| patches.active[p] && sides_seen(patches, p, eye).1)
+            .collect();
+        Raster {
+            width,
+            height,
+            patch: frame.patch,
+            front: frame.front,
+            back_face,
+        }
+    }
+
+    /// The picture of `solution` in this view, as [`render_rgb_shaded`] with flat shading gives
+    /// it: each pixel in its patch's B (the back face's for a two-sided patch seen from
+    /// behind), `exposure` or auto.
+    pub fn rgb(&self, patches: &Patches, solution: &Solution, exposure: Option<f64>) -> Vec<u8> {
+        let radiance_of = |p: usize| {
+            if self.back_face[p] {
+                solution
+                    .patch_radiance_back
+                    .get(p)
+                    .copied()
+                    .unwrap_or([0.0; 3])
+                    .map(sanitize)
+            } else {
+                patch_b(solution, p)
+            }
+        };
+        let exposure = exposure
+            .filter(|e| e.is_finite() && *e > 0.0)
+            .unwrap_or_else(|| {
+                let radiance: Vec<[f64; 3]> = (self.patch.iter())
+                    .map(|&p| {
+                        if p == NO_PATCH {
+                            [0.0; 3]
+                        } else {
+                            radiance_of(p as usize)
+                        }
+                    })
+                    .collect();
+                frame_exposure(patches, (&self.patch, &self.front), &radiance)
+            });
+        // Flat: a pixel's colour is its patch's, tone-mapped once per patch.
+        let mut colour: Vec<Option<[u8; 3]>> = vec![None; self.back_face.len()];
+        let mut rgb = Vec::with_capacity(self.patch.len() * 3);
+        for (&p, &front) in self.patch.iter().zip(&self.front) {
+            let pixel = if p == NO_PATCH {
+                [0; 3]
+            } else if front {
+                *colour[p as usize]
+                    .get_or_insert_with(|| tone_map(radiance_of(p as usize), exposure))
+            } else {
+                BACK_FACE_RGB
+            };
+            rgb.extend_from_slice(&pixel);
+        }
+        rgb
+    }
+
+    /// [`Raster::rgb`] written as a PNG, as [`render_png`] writes it.
+    ///
+    /// Errors: an [`Error::Parameter`] for an `exposure` that is not finite and > 0, an
+    /// [`Error::Io`] naming `path` when writing fails (no file is left behind).
+    pub fn write_png(
+        &self,
+        path: &Path,
+        patches: &Patches,
+        solution: &Solution,
+        exposure: Option<f64>,
+    ) -> Result<()> {
+        if let Some(e) = exposure {
+            if !(e.is_finite() && e > 0.0) {
+                return Err(Error::Parameter(format!(
+                    "CameraOptions::exposure {e} must be finite and > 0"
+                )));
+            }
+        }
+        let rgb = self.rgb(patches, solution, exposure);
+        write_png(path, (self.width, self.height), &rgb)
+    }
+}
+
 /// Auto exposure from the visible front-side pixels: non-emissive ones first, then emitters,
 /// else 1.
-fn frame_exposure(patches: &Patches, frame: &Frame) -> f64 {
+fn frame_exposure(
+    patches: &Patches,
+    (patch, front): (&[u32], &[bool]),
+    radiance: &[[f64; 3]],
+) -> f64 {
     let collect = |emissive: bool| -> Vec<(f64, f64)> {
-        (0..frame.patch.len())
+        (0..patch.len())
             .filter(|&i| {
-                frame.patch[i] != NO_PATCH
-                    && frame.front[i]
-                    && patches.is_emitter(frame.patch[i] as usize) == emissive
+                patch[i] != NO_PATCH
+                    && front[i]
+                    && patches.is_emitter(patch[i] as usize) == emissive
             })
-            .map(|i| (luminance(frame.radiance[i]), 1.0))
+            .map(|i| (luminance(radiance[i]), 1.0))
             .collect()
     };
     exposure_from(&collect(false))
@@ -770,13 +920,19 @@ pub fn render_png_shaded(
 ) -> Result<()> {
     camera.validate()?;
     let rgb = render_rgb_shaded(patches, solution, camera, shading);
+    write_png(path, (camera.width, camera.height), &rgb)
+}
+
+/// Writes `rgb` (RGB8, row-major from the top-left) as an 8-bit RGB PNG of `width` x `height`
+/// with the sRGB chunk set, atomically.
+fn write_png(path: &Path, (width, height): (u32, u32), rgb: &[u8]) -> Result<()> {
     write_atomic(path, |w| {
-        let mut encoder = png::Encoder::new(w, camera.width, camera.height);
+        let mut encoder = png::Encoder::new(w, width, height);
         encoder.set_color(png::ColorType::Rgb);
         encoder.set_depth(png::BitDepth::Eight);
         encoder.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
         let mut writer = encoder.write_header().map_err(png_to_io)?;
-        writer.write_image_data(&rgb).map_err(png_to_io)?;
+        writer.write_image_data(rgb).map_err(png_to_io)?;
         writer.finish().map_err(png_to_io)
     })
 }

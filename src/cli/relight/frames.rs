@@ -147,6 +147,9 @@ pub(super) struct FrameView {
     pub(super) camera: CameraOptions,
     /// Flat or smooth.
     pub(super) shading: Shading,
+    /// With flat shading, the view's pixels, rasterized for the first frame and shaded for
+    /// every frame (the geometry does not change, only the light).
+    pub(super) raster: Option<render::Raster>,
 }
 
 /// Relights and writes every frame; returns their records. `base_power`: the emitted power of
@@ -244,12 +247,15 @@ fn render_frame(
         camera.exposure = Some(render::auto_exposure(relighter.patches(), &relit.solution));
     }
     let render_start = Instant::now();
-    render::render_png_shaded(
-        &frame_path(&args.out, frame),
-        relighter.patches(),
-        &relit.solution,
-        camera,
-        view.shading,
-    )?;
+    let path = frame_path(&args.out, frame);
+    let patches = relighter.patches();
+    if view.shading == Shading::Flat {
+        let raster = view
+            .raster
+            .get_or_insert_with(|| render::Raster::new(patches, camera));
+        raster.write_png(&path, patches, &relit.solution, camera.exposure)?;
+    } else {
+        render::render_png_shaded(&path, patches, &relit.solution, camera, view.shading)?;
+    }
     Ok(render_start.elapsed().as_secs_f64())
 }

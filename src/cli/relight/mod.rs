@@ -279,6 +279,7 @@ pub fn relight(args: &RelightArgs) -> Result<()> {
         } else {
             Shading::Flat
         },
+        raster: None,
     };
     if !args.out.exists() {
         std::fs::create_dir(&args.out).map_err(|e| Error::io(&args.out, e))?;
