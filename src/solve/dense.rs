@@ -133,6 +133,7 @@ fn solve_one_sided(
         );
         if iteration == 1 {
             stats.max_row_sum = sweep.iter().map(|r| r.row).fold(0.0, f64::max);
+            guard.note_rows(stats.max_row_sum);
             stats.links = sweep.iter().map(|r| r.links).sum();
             stats.capped_rows = sweep.iter().filter(|r| r.capped).count();
         }

@@ -234,6 +234,7 @@ impl Prepared {
             );
             if iteration == first && !going_on {
                 stats.max_row_sum = sums.max_row;
+                guard.note_rows(sums.max_row);
             }
             let change = change_ratio(sums.num, sums.den);
             std::mem::swap(&mut radiance, &mut next_radiance);
