@@ -215,6 +215,21 @@ fn patch_b(solution: &Solution, p: usize) -> [f64; 3] {
         .map(sanitize)
 }
 
+/// The radiance patch `p` is drawn in: its back face's when `back_face` (a two-sided patch seen
+/// from behind), else its front's; missing values count as 0, non-finite ones are sanitized.
+fn shown_b(solution: &Solution, p: usize, back_face: bool) -> [f64; 3] {
+    if back_face {
+        solution
+            .patch_radiance_back
+            .get(p)
+            .copied()
+            .unwrap_or([0.0; 3])
+            .map(sanitize)
+    } else {
+        patch_b(solution, p)
+    }
+}
+
 /// Auto exposure over the whole model (used for the PLY vertex colours): the area-weighted 95th
 /// percentile of the luminance of the non-emissive active patches is mapped to 0.8.
 ///
@@ -499,6 +514,20 @@ struct View {
     height: u32,
 }
 
+impl View {
+    /// The view `camera` gives of `patches`: its eye and target, or [`resolve_view`]'s.
+    fn of(patches: &Patches, camera: &CameraOptions) -> View {
+        let (eye, target) = resolve_view(patches, camera);
+        View {
+            eye,
+            target,
+            fov_deg: camera.fov_deg,
+            width: camera.width,
+            height: camera.height,
+        }
+    }
+}
+
 /// How patch `p` is seen from `eye` (world units): (drawn as a front, showing its back face).
 /// A two-sided patch seen from behind shows its back face, lit as a front; a one-sided one
 /// shows its back side (drawn in [`BACK_FACE_RGB`]).
@@ -533,16 +562,7 @@ fn rasterize(patches: &Patches, solution: &Solution, welded: Option<&Welded>, vi
         }
         let world = patches.corners[p].map(|c| patches.frame.world_from_unit(c));
         let (front, back_face) = sides_seen(patches, p, eye);
-        let b = if back_face {
-            solution
-                .patch_radiance_back
-                .get(p)
-                .copied()
-                .unwrap_or([0.0; 3])
-                .map(sanitize)
-        } else {
-            patch_b(solution, p)
-        };
+        let b = shown_b(solution, p, back_face);
         let attrs = match welded {
             Some(wd) if !back_face => wd.faces[p].map(|v| wd.radiance[v as usize]),
             _ => [b; 3],
@@ -709,16 +729,8 @@ pub fn render_rgb_shaded(
     if shading == Shading::Flat {
         return Raster::new(patches, camera).rgb(patches, solution, camera.exposure);
     }
-    let (eye, target) = resolve_view(patches, camera);
     let welded = weld(patches, solution);
-    let view = View {
-        eye,
-        target,
-        fov_deg: camera.fov_deg,
-        width,
-        height,
-    };
-    let frame = rasterize(patches, solution, Some(&welded), view);
+    let frame = rasterize(patches, solution, Some(&welded), View::of(patches, camera));
     tone_pixels(
         patches,
         (&frame.patch, &frame.front),
@@ -782,17 +794,10 @@ impl Raster {
                 back_face: Vec::new(),
             };
         }
-        let (eye, target) = resolve_view(patches, camera);
-        let view = View {
-            eye,
-            target,
-            fov_deg: camera.fov_deg,
-            width,
-            height,
-        };
+        let view = View::of(patches, camera);
         let frame = rasterize(patches, &Solution::default(), None, view);
         let back_face = (0..patches.len())
-            .map(|p| patches.active[p] && sides_seen(patches, p, eye).1)
+            .map(|p| patches.active[p] && sides_seen(patches, p, view.eye).1)
             .collect();
         Raster {
             width,
@@ -807,18 +812,7 @@ impl Raster {
     /// it: each pixel in its patch's B (the back face's for a two-sided patch seen from
     /// behind), `exposure` or auto.
     pub fn rgb(&self, patches: &Patches, solution: &Solution, exposure: Option<f64>) -> Vec<u8> {
-        let radiance_of = |p: usize| {
-            if self.back_face[p] {
-                solution
-                    .patch_radiance_back
-                    .get(p)
-                    .copied()
-                    .unwrap_or([0.0; 3])
-                    .map(sanitize)
-            } else {
-                patch_b(solution, p)
-            }
-        };
+        let radiance_of = |p: usize| shown_b(solution, p, self.back_face[p]);
         let exposure = exposure
             .filter(|e| e.is_finite() && *e > 0.0)
             .unwrap_or_else(|| {
