@@ -256,6 +256,18 @@ fn check_solution(what: &str, scene: &Scene, solution: &Solution, solver: Solver
         st.largest_b_over_bound,
         st.failure.as_ref().map(|f| format!(": FAILED: {f}")).unwrap_or_default()
     );
+    // Rows deeper than DAMP_ROW_SUM damp the antiradiance from the second sweep, and only
+    // they do (the stall rules need several sweeps).
+    if st.iterations > 1 {
+        assert_eq!(
+            st.damped_after == Some(1),
+            st.max_row_sum > health::DAMP_ROW_SUM,
+            "{what} [{}]: damped after {:?}, max row sum {}",
+            solver.0,
+            st.damped_after,
+            st.max_row_sum
+        );
+    }
     match &st.failure {
         Some(f) => {
             assert!(
