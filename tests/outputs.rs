@@ -476,6 +476,35 @@ fn one_raster_shades_every_frame_as_a_fresh_render() {
     }
 }
 
+/// A raster of an empty picture shades to nothing and refuses to write a PNG (one error, no
+/// file), as does one given an invalid exposure.
+#[test]
+fn an_empty_raster_writes_no_file() {
+    let scene = square_scene(false);
+    let patches = build_patches(&scene, None);
+    let solution = fake_solution(&patches);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("empty.png");
+    let empty = Raster::new(
+        &patches,
+        &CameraOptions {
+            width: 0,
+            ..front_camera()
+        },
+    );
+    assert!(empty.rgb(&patches, &solution, None).is_empty());
+    assert!(empty.write_png(&path, &patches, &solution, None).is_err());
+    let raster = Raster::new(&patches, &front_camera());
+    for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        let err = raster
+            .write_png(&path, &patches, &solution, Some(bad))
+            .unwrap_err();
+        assert!(matches!(err, Error::Parameter(_)), "{err}");
+    }
+    assert!(!path.exists());
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+}
+
 #[test]
 fn back_side_is_dark_grey_and_smooth_shading_interpolates() {
     let scene = square_scene(false);
