@@ -38,8 +38,9 @@ pub struct SolveStats {
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub sweep_changes: Vec<f64>,
     /// The sweep after which the solver damped its sweeps' antiradiance because their change
-    /// kept growing or stalled ([`crate::solve::health::Damping`]); `None` when every sweep was
-    /// plain.
+    /// kept growing or stalled, or (1) because the first sweep's rows were deeper than
+    /// [`crate::solve::health::DAMP_ROW_SUM`] ([`crate::solve::health::Damping`]); `None` when
+    /// every sweep was plain.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub damped_after: Option<usize>,
     /// The sweep after which the solver damped its radiance as well, its damped sweeps having
