@@ -113,13 +113,7 @@ impl CameraOptions {
                 camera.fov_deg
             )));
         }
-        if let Some(e) = camera.exposure {
-            if !(e.is_finite() && e > 0.0) {
-                return Err(Error::Parameter(format!(
-                    "CameraOptions::exposure {e} must be finite and > 0"
-                )));
-            }
-        }
+        check_exposure(camera.exposure)?;
         for (name, p) in [("eye", camera.eye), ("target", camera.target)] {
             if let Some(p) = p {
                 if !p.is_finite() {
@@ -138,6 +132,23 @@ impl CameraOptions {
             }
         }
         Ok(())
+    }
+}
+
+/// `exposure` when it is one the renderer takes (finite and > 0); `None` (auto exposure)
+/// otherwise.
+fn usable_exposure(exposure: Option<f64>) -> Option<f64> {
+    exposure.filter(|e| e.is_finite() && *e > 0.0)
+}
+
+/// Errors: an [`Error::Parameter`] when `exposure` is given but not one the renderer takes
+/// ([`usable_exposure`]).
+fn check_exposure(exposure: Option<f64>) -> Result<()> {
+    match exposure {
+        Some(e) if usable_exposure(exposure).is_none() => Err(Error::Parameter(format!(
+            "CameraOptions::exposure {e} must be finite and > 0"
+        ))),
+        _ => Ok(()),
     }
 }
 
@@ -242,9 +253,7 @@ pub fn auto_exposure(patches: &Patches, solution: &Solution) -> f64 {
             .map(|p| (luminance(patch_b(solution, p)), patches.area[p]))
             .collect()
     };
-    exposure_from(&collect(false))
-        .or_else(|| exposure_from(&collect(true)))
-        .filter(|e| e.is_finite() && *e > 0.0)
+    usable_exposure(exposure_from(&collect(false)).or_else(|| exposure_from(&collect(true))))
         .unwrap_or(1.0)
 }
 
@@ -538,8 +547,10 @@ fn sides_seen(patches: &Patches, p: usize, eye: DVec3) -> (bool, bool) {
     (facing || back_face, back_face)
 }
 
-/// Rasterizes the patches as seen in `view`; `welded` gives smooth per-corner radiance.
-fn rasterize(patches: &Patches, solution: &Solution, welded: Option<&Welded>, view: View) -> Frame {
+/// Rasterizes the patches as seen in `view`: which patch each pixel shows and from which side,
+/// and with `smooth` (a solution and its welded vertices) the radiance interpolated over each
+/// patch (a two-sided patch seen from behind in its back face's B); without it, radiance 0.
+fn rasterize(patches: &Patches, smooth: Option<(&Solution, &Welded)>, view: View) -> Frame {
     let View {
         eye,
         target,
@@ -562,10 +573,10 @@ fn rasterize(patches: &Patches, solution: &Solution, welded: Option<&Welded>, vi
         }
         let world = patches.corners[p].map(|c| patches.frame.world_from_unit(c));
         let (front, back_face) = sides_seen(patches, p, eye);
-        let b = shown_b(solution, p, back_face);
-        let attrs = match welded {
-            Some(wd) if !back_face => wd.faces[p].map(|v| wd.radiance[v as usize]),
-            _ => [b; 3],
+        let attrs = match smooth {
+            Some((_, wd)) if !back_face => wd.faces[p].map(|v| wd.radiance[v as usize]),
+            Some((solution, _)) => [shown_b(solution, p, back_face); 3],
+            None => [[0.0; 3]; 3],
         };
         let verts: [ClipVertex; 3] = [0, 1, 2].map(|k| (cam.to_camera(world[k]), attrs[k]));
         // Sutherland-Hodgman against the near plane z = near.
@@ -612,7 +623,7 @@ fn probe(patches: &Patches, eye: DVec3, target: DVec3, camera: &CameraOptions) -
         width: w,
         height: h,
     };
-    let frame = rasterize(patches, &Solution::default(), None, view);
+    let frame = rasterize(patches, None, view);
     let (front, back) = frame.side_counts();
     let mut seen: Vec<u32> = (0..frame.patch.len())
         .filter(|&i| frame.patch[i] != NO_PATCH && frame.front[i])
@@ -730,7 +741,11 @@ pub fn render_rgb_shaded(
         return Raster::new(patches, camera).rgb(patches, solution, camera.exposure);
     }
     let welded = weld(patches, solution);
-    let frame = rasterize(patches, solution, Some(&welded), View::of(patches, camera));
+    let frame = rasterize(
+        patches,
+        Some((solution, &welded)),
+        View::of(patches, camera),
+    );
     tone_pixels(
         patches,
         (&frame.patch, &frame.front),
@@ -748,8 +763,7 @@ fn tone_pixels(
     radiance: &[[f64; 3]],
     exposure: Option<f64>,
 ) -> Vec<u8> {
-    let exposure = exposure
-        .filter(|e| e.is_finite() && *e > 0.0)
+    let exposure = usable_exposure(exposure)
         .unwrap_or_else(|| frame_exposure(patches, (patch, front), radiance));
     let mut rgb = Vec::with_capacity(patch.len() * 3);
     for i in 0..patch.len() {
@@ -795,7 +809,7 @@ impl Raster {
             };
         }
         let view = View::of(patches, camera);
-        let frame = rasterize(patches, &Solution::default(), None, view);
+        let frame = rasterize(patches, None, view);
         let back_face = (0..patches.len())
             .map(|p| patches.active[p] && sides_seen(patches, p, view.eye).1)
             .collect();
@@ -813,20 +827,18 @@ impl Raster {
     /// behind), `exposure` or auto.
     pub fn rgb(&self, patches: &Patches, solution: &Solution, exposure: Option<f64>) -> Vec<u8> {
         let radiance_of = |p: usize| shown_b(solution, p, self.back_face[p]);
-        let exposure = exposure
-            .filter(|e| e.is_finite() && *e > 0.0)
-            .unwrap_or_else(|| {
-                let radiance: Vec<[f64; 3]> = (self.patch.iter())
-                    .map(|&p| {
-                        if p == NO_PATCH {
-                            [0.0; 3]
-                        } else {
-                            radiance_of(p as usize)
-                        }
-                    })
-                    .collect();
-                frame_exposure(patches, (&self.patch, &self.front), &radiance)
-            });
+        let exposure = usable_exposure(exposure).unwrap_or_else(|| {
+            let radiance: Vec<[f64; 3]> = (self.patch.iter())
+                .map(|&p| {
+                    if p == NO_PATCH {
+                        [0.0; 3]
+                    } else {
+                        radiance_of(p as usize)
+                    }
+                })
+                .collect();
+            frame_exposure(patches, (&self.patch, &self.front), &radiance)
+        });
         // Flat: a pixel's colour is its patch's, tone-mapped once per patch.
         let mut colour: Vec<Option<[u8; 3]>> = vec![None; self.back_face.len()];
         let mut rgb = Vec::with_capacity(self.patch.len() * 3);
@@ -855,13 +867,7 @@ impl Raster {
         solution: &Solution,
         exposure: Option<f64>,
     ) -> Result<()> {
-        if let Some(e) = exposure {
-            if !(e.is_finite() && e > 0.0) {
-                return Err(Error::Parameter(format!(
-                    "CameraOptions::exposure {e} must be finite and > 0"
-                )));
-            }
-        }
+        check_exposure(exposure)?;
         let rgb = self.rgb(patches, solution, exposure);
         write_png(path, (self.width, self.height), &rgb)
     }
@@ -884,9 +890,7 @@ fn frame_exposure(
             .map(|i| (luminance(radiance[i]), 1.0))
             .collect()
     };
-    exposure_from(&collect(false))
-        .or_else(|| exposure_from(&collect(true)))
-        .filter(|e| e.is_finite() && *e > 0.0)
+    usable_exposure(exposure_from(&collect(false)).or_else(|| exposure_from(&collect(true))))
         .unwrap_or(1.0)
 }
 

@@ -103,13 +103,13 @@ impl PairCache {
         }
     }
 
-    /// Bytes held.
     /// Bytes of the factors of `pairs` (element, cluster link) pairs over `elements`
     /// elements, with their starts: what [`PairCache::build`] holds its budget against.
     pub(super) fn factor_bytes(pairs: u64, elements: usize) -> u64 {
         pairs * std::mem::size_of::<[f32; 2]>() as u64 + (elements as u64 + 1) * 8
     }
 
+    /// Bytes held.
     pub(super) fn bytes(&self) -> u64 {
         (self.start.len() * 8
             + self.ranges.len() * 8

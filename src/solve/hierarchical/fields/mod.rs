@@ -119,6 +119,12 @@ pub(super) struct Fields {
     pub(super) evaluations: u64,
 }
 
+/// Bytes of cached terms for `links` field links with `starts` entries of
+/// [`Fields::term_start`] (one per cached field, and one past the last).
+fn terms_bytes(links: u64, starts: u64) -> u64 {
+    links * (LINK_TERMS * 4) as u64 + starts * 4
+}
+
 impl Fields {
     /// No fields: every link of `links` is gathered per element.
     pub(super) fn none(links: &Links, elements: usize) -> Fields {
@@ -320,7 +326,7 @@ impl Fields {
 
     /// Bytes the cached terms take ([`Fields::cache_terms`]).
     pub(super) fn cached_terms_bytes(&self) -> u64 {
-        (self.terms.len() * LINK_TERMS * 4 + self.term_start.len() * 4) as u64
+        terms_bytes(self.terms.len() as u64, self.term_start.len() as u64)
     }
 
     /// Computes and keeps the terms of every field link of the first fields whose terms fit
@@ -329,13 +335,13 @@ impl Fields {
     /// multiply-adds instead of their geometry, and computes the rest as before. Call after
     /// [`Fields::keep_live`] (a slot without antiradiance sums caches none).
     pub(super) fn cache_terms(&mut self, ctx: &SweepContext, links: &Links, budget: u64) {
-        let per_link = (LINK_TERMS * 4) as u64;
         let mut start = Vec::with_capacity(self.node.len() + 1);
         let mut total = 0u32;
         for f in 0..self.node.len() {
             let node = self.node[f] as usize;
             let count = links.cluster_start[node + 1] - self.near_end[node];
-            if u64::from(total + count) * per_link + (f as u64 + 2) * 4 > budget {
+            // Fields 0..=f cached: their links' terms and f + 2 starts.
+            if terms_bytes(u64::from(total + count), f as u64 + 2) > budget {
                 break;
             }
             start.push(total);
