@@ -121,9 +121,22 @@ impl SweepContext<'_> {
                 }
             };
             if cached {
+                // Widened term by term: a widened copy of the 40 terms cost more than the sums.
                 let t = &fields.terms[fields.term_start[f] as usize + (j - first)];
-                let t = t.map(f64::from);
-                add(&t[..IRR_TERMS], &t[IRR_TERMS..]);
+                for (acc, &t) in irr.iter_mut().zip(&t[..IRR_TERMS]) {
+                    let t = f64::from(t);
+                    for c in 0..C {
+                        acc[c] += t * i[c];
+                    }
+                }
+                if with_anti {
+                    for (acc, &t) in a.iter_mut().zip(&t[IRR_TERMS..]) {
+                        let t = f64::from(t);
+                        for c in 0..C {
+                            acc[c] += t * i[c];
+                        }
+                    }
+                }
             } else {
                 let (t, a_t) = self.link_terms(fields, links, (f, s, j), with_anti);
                 add(&t, &a_t);
