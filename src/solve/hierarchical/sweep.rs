@@ -180,7 +180,14 @@ impl SweepContext<'_> {
         (radiance, radiance_back): (&[[f64; C]], &[[f64; C]]),
         anti: &[[f32; C]],
     ) -> [f32; C] {
-        let w = self.link_direction(l);
+        // The terms are summed along the unnormalized direction and scaled once at the end: the
+        // square root and division then overlap the sums instead of delaying every term.
+        let w =
+            self.points[l.receiver as usize].centroid() - self.points[l.sender as usize].centroid();
+        let length = w.length();
+        if !(length > 0.0) || !length.is_finite() {
+            return [0.0; C];
+        }
         let bin = l.bin as usize;
         let mut acc = [0.0f64; C];
         // The state is read only where a term uses it (see [`pull_term`]).
@@ -214,7 +221,8 @@ impl SweepContext<'_> {
                 );
             }
         }
-        acc.map(|x| x as f32)
+        let inv = 1.0 / length;
+        acc.map(|x| (x * inv) as f32)
     }
 }
 
