@@ -260,6 +260,51 @@ fn warm_start_takes_fewer_iterations_than_cold_for_a_small_change() {
     assert!(err < 0.01, "{:.3}%", 100.0 * err);
 }
 
+#[test]
+fn a_source_combining_the_last_ones_starts_from_their_combined_solutions() {
+    // Three solves, each with one more wall glowing, then a mix of the last two: by linearity
+    // its solution is the same mix of theirs, which the warm start finds from the kept states.
+    let scene = generated::cornell_box();
+    let options = SolverOptions::default();
+    let base = scene.emission.clone();
+    let glow = |part: &str, k: f64| {
+        let mut e = base.clone();
+        for t in cornell_part(part) {
+            e[t] = [k; 3];
+        }
+        e
+    };
+    let (left, right) = (glow("red wall", 0.3), glow("green wall", 0.3));
+    let mix: Vec<[f64; 3]> = (0..base.len())
+        .map(|t| std::array::from_fn(|c| 0.4 * left[t][c] + 0.6 * right[t][c]))
+        .collect();
+
+    let mut kept = Relighter::new(&scene, None, &options).unwrap();
+    kept.solve(&Progress::hidden());
+    kept.relight(&left).unwrap();
+    kept.relight(&right).unwrap();
+    let combined = kept.relight(&mix).unwrap();
+
+    // The same last step from the last state alone (scaled and moved by the change).
+    let mut alone = Relighter::new(&scene, None, &options).unwrap();
+    alone.relight(&right).unwrap();
+    let scaled = alone.relight(&mix).unwrap();
+
+    assert!(combined.warm_started && scaled.warm_started);
+    assert!(combined.solution.stats.converged && scaled.solution.stats.converged);
+    let (c, s) = (
+        combined.solution.stats.iterations,
+        scaled.solution.stats.iterations,
+    );
+    assert!(
+        c < s,
+        "from the combined states {c} sweeps, from the last alone {s}"
+    );
+    let cold = from_scratch(&with_emission(&scene, &mix), &options);
+    let err = error_against(&scene, &combined.solution, &cold);
+    assert!(err < 0.01, "{:.3}%", 100.0 * err);
+}
+
 // ---------------------------------------------------------------------------------------------
 // Analytic lights
 

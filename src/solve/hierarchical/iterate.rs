@@ -173,6 +173,7 @@ impl Prepared {
             same_source,
             same_source_len,
         } = self.start_state::<C>(elem_source, warm);
+        let earlier = earlier_states(warm, matched && same_source_len, same_source);
         let resume = resume.filter(|_| matched);
         let (resume, going_on) = match resume {
             Some(r) if same_source => (Some(r), true),
@@ -308,7 +309,7 @@ impl Prepared {
             t0,
             (radiance, radiance_back, anti),
             (stats, memory, bound),
-            (anderson, convergence, guard, last),
+            (anderson, convergence, guard, last, earlier),
         )
     }
 
@@ -491,25 +492,63 @@ impl Prepared {
         let (radiance, radiance_back, anti) = match warm {
             Some((w, (mut radiance, mut radiance_back, mut anti))) => {
                 if !same_source && w.source.len() == faces {
-                    // The old state scaled per channel by the least-squares factor of the new
-                    // source against the old one (exact when every light changed by one factor),
-                    // then moved by what that leaves of the change.
-                    let old: Vec<[f64; C]> =
-                        w.source[..n].iter().map(|&s| channels_of(s)).collect();
-                    let old_back = dense_back(&w.source);
-                    let k = source_factor(&emission, &old, &self.elem_area);
-                    let fronts = radiance.iter_mut().zip(emission.iter().zip(&old));
+                    // The old states combined per channel by the least-squares factors that
+                    // bring their sources closest to the new one (exact when the new source is
+                    // a combination of theirs; one state alone is scaled), then moved by what
+                    // that leaves of the change.
+                    let mut bases = vec![(w.source.as_slice(), None)];
+                    for e in &w.earlier {
+                        if e.source.len() == faces {
+                            if let Some(values) = e.to_channels::<C>(n, backs, slots) {
+                                bases.push((e.source.as_slice(), Some(values)));
+                            }
+                        }
+                    }
+                    let old: Vec<Vec<[f64; C]>> = bases
+                        .iter()
+                        .map(|(source, _)| source[..n].iter().map(|&s| channels_of(s)).collect())
+                        .collect();
+                    let old_back: Vec<Vec<[f64; C]>> =
+                        bases.iter().map(|(source, _)| dense_back(source)).collect();
+                    let old_refs: Vec<&[[f64; C]]> = old.iter().map(Vec::as_slice).collect();
+                    let k = warm_factors(&emission, &old_refs, &self.elem_area);
+                    let k0 = k[0];
+                    let fronts = radiance.iter_mut().zip(emission.iter().zip(&old[0]));
                     let back_faces = radiance_back
                         .iter_mut()
-                        .zip(emission_back.iter().zip(&old_back));
+                        .zip(emission_back.iter().zip(&old_back[0]));
                     for (b, (new, old)) in fronts.chain(back_faces) {
                         for c in 0..C {
-                            b[c] = k[c] * b[c] + new[c] - k[c] * old[c];
+                            b[c] = k0[c] * b[c] + new[c] - k0[c] * old[c];
                         }
                     }
                     for a in anti.iter_mut() {
                         for c in 0..C {
-                            a[c] = (k[c] * a[c] as f64) as f32;
+                            a[c] = (k0[c] * a[c] as f64) as f32;
+                        }
+                    }
+                    // The older states' shares (0 where they were left out).
+                    let older = bases.iter().zip(&k).zip(old.iter().zip(&old_back)).skip(1);
+                    for (((_, values), k), (old, old_back)) in older {
+                        let Some((b_i, b_back_i, a_i)) = values else {
+                            continue;
+                        };
+                        if k.iter().all(|&x| x == 0.0) {
+                            continue;
+                        }
+                        let fronts = radiance.iter_mut().zip(b_i.iter().zip(old.iter()));
+                        let back_faces = radiance_back
+                            .iter_mut()
+                            .zip(b_back_i.iter().zip(old_back.iter()));
+                        for (b, (b_i, s_i)) in fronts.chain(back_faces) {
+                            for c in 0..C {
+                                b[c] += k[c] * (b_i[c] - s_i[c]);
+                            }
+                        }
+                        for (a, a_i) in anti.iter_mut().zip(a_i.iter()) {
+                            for c in 0..C {
+                                a[c] = (a[c] as f64 + k[c] * a_i[c] as f64) as f32;
+                            }
                         }
                     }
                 }
@@ -765,7 +804,13 @@ impl Prepared {
         t0: Instant,
         (radiance, radiance_back, anti): (Vec<[f64; C]>, Vec<[f64; C]>, Vec<[f32; C]>),
         (mut stats, mut memory, bound): (SolveStats, MemoryStats, Option<f64>),
-        (anderson, convergence, guard, last): (Option<Anderson>, Convergence, Guard, usize),
+        (anderson, convergence, guard, last, earlier): (
+            Option<Anderson>,
+            Convergence,
+            Guard,
+            usize,
+            Vec<std::sync::Arc<ElementState>>,
+        ),
     ) -> (Solution, ElementState) {
         let (options, elem_area) = (&self.options, &self.elem_area);
         let (n, backs) = (self.element_count(), self.elem_two.len());
@@ -828,7 +873,27 @@ impl Prepared {
             channels: C,
             source: elem_source.to_vec(),
             resume: Some(Box::new(resume)),
+            earlier,
         };
         (solution, state)
+    }
+}
+
+/// The earlier states the state of a solve warm-started from `warm` keeps
+/// ([`ElementState`]'s `earlier`): `warm`'s own when the solve goes on with the same source,
+/// `warm` itself and its most recent earlier ones when the source changed (`usable`: `warm`
+/// belongs to this scene and was solved for a source of this length), none otherwise.
+fn earlier_states(
+    warm: Option<&ElementState>,
+    usable: bool,
+    same_source: bool,
+) -> Vec<std::sync::Arc<ElementState>> {
+    match warm {
+        Some(w) if usable && same_source => w.earlier.clone(),
+        Some(w) if usable => std::iter::once(std::sync::Arc::new(w.without_history()))
+            .chain(w.earlier.iter().cloned())
+            .take(WARM_BASES - 1)
+            .collect(),
+        _ => Vec::new(),
     }
 }

@@ -315,3 +315,37 @@ fn pushed_links_cover_every_pair_once_and_agree_with_the_per_element_gather() {
     }
     assert!(num <= 0.003 * den, "{:.3}%", 100.0 * num / den);
 }
+
+#[test]
+fn warm_factors_recover_a_combination_of_independent_sources() {
+    let area = [1.0, 2.0, 0.5, 1.5];
+    let s0 = [[1.0], [0.0], [2.0], [1.0]];
+    let s1 = [[0.0], [1.0], [1.0], [3.0]];
+    let s2 = [[2.0], [1.0], [0.0], [0.5]];
+    let new: Vec<[f64; 1]> = (0..4)
+        .map(|e| [0.5 * s0[e][0] - 1.5 * s1[e][0] + 2.0 * s2[e][0]])
+        .collect();
+    let k = warm_factors(&new, &[&s0, &s1, &s2], &area);
+    for (got, want) in k.iter().zip([0.5, -1.5, 2.0]) {
+        assert!((got[0] - want).abs() < 1e-12, "{k:?}");
+    }
+}
+
+#[test]
+fn warm_factors_leave_out_sources_that_add_nothing_independent() {
+    // The older sources are multiples of the most recent one: it alone is scaled, exactly as
+    // a single warm state is.
+    let area = [1.0, 3.0, 0.25];
+    let s0 = [[1.0, 2.0], [2.0, 0.0], [0.5, 1.0]];
+    let s1 = s0.map(|x| x.map(|v| 3.0 * v));
+    let s2 = s0.map(|x| x.map(|v| -0.5 * v));
+    let new = [[2.0, 1.0], [4.5, 0.5], [1.0, 2.5]];
+    let k = warm_factors(&new, &[&s0, &s1, &s2], &area);
+    let alone = warm_factors(&new, &[&s0], &area);
+    assert_eq!(k[0], alone[0]);
+    assert_eq!(k[1], [0.0; 2]);
+    assert_eq!(k[2], [0.0; 2]);
+    // A zero source: factor 1, as before.
+    let zero = [[0.0; 2]; 3];
+    assert_eq!(warm_factors(&new, &[&zero], &area)[0], [1.0; 2]);
+}
