@@ -3,15 +3,17 @@
 //!
 //! - `*_sweep_step`: the lights changed by one step of a 30-frame sweep (the animation of
 //!   `antiradiance relight`, emitters away from the spot at 10%), to the tolerance, at the
-//!   default and the fast preset;
+//!   default and the fast preset; the relights step forward through frames 1..29 and wrap
+//!   around (one jump in 29 steps), so each starts from the states of the frames before it as
+//!   an animation's do;
 //! - `default_preset_arbitrary_change`: every emitter to its own random brightness in
 //!   [0.2, 1.2] of its own (a new draw each relight: no mix of precomputed lights), to the
 //!   tolerance;
 //! - `default_preset_progressive_100ms`: the same changes, one progressive frame each
 //!   (`Relighter::frame_budget` of 100 ms: the sweeps that fit);
 //! - `default_preset_point_light_move` and `..._dim`: a point light added to the scene moved
-//!   between two places (its shadow rays traced again) or dimmed to half and back (no shadow
-//!   ray), to the tolerance;
+//!   to a new place each relight, drawn along a 6.4 m path (its shadow rays traced again), or
+//!   dimmed to half and back (no shadow ray), to the tolerance;
 //! - `*_mix_K_lights`: a mix of K precomputed band lights (no sweep).
 //!
 //! Scene: the seed room (`../shared/meshes/room_radiosity_small.obj`, `--emit-above 3.65
@@ -89,13 +91,23 @@ fn random_emission(scene: &Scene, seed: u64) -> Vec<[f64; 3]> {
     emission
 }
 
-/// The room's point light (scene units: the room spans about 19 x 9 x 16) at its two places.
-fn point_light(at: usize) -> Light {
-    let position = [DVec3::new(2.0, 2.0, 1.0), DVec3::new(-3.0, 2.5, -2.0)][at];
+/// The room's point light (scene units: the room spans about 19 x 9 x 16) at `t` in [0, 1] of
+/// its path.
+fn point_light(t: f64) -> Light {
+    let (from, to) = (DVec3::new(2.0, 2.0, 1.0), DVec3::new(-3.0, 2.5, -2.0));
     Light::Point {
-        position,
+        position: from + t * (to - from),
         intensity: [20.0; 3],
     }
+}
+
+/// A deterministic stream of numbers in [0, 1): the `i`-th.
+fn uniform(i: u64) -> f64 {
+    let x = (i.wrapping_add(1))
+        .wrapping_mul(0x9e37_79b9_7f4a_7c15)
+        .rotate_left(31)
+        .wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    (x >> 11) as f64 / (1u64 << 53) as f64
 }
 
 /// The relights of arbitrary changes, progressive frames and a moving or dimmed point light,
@@ -134,16 +146,18 @@ fn arbitrary(c: &mut Criterion, name: &str, scene: &Scene) {
     drop(relighter);
 
     let mut lit = scene.clone();
-    lit.lights.push(point_light(0));
+    lit.lights.push(point_light(0.0));
     let Ok(mut relighter) = Relighter::new(&lit, None, &options) else {
         eprintln!("skipping the point light: the relighter cannot be built");
         return;
     };
     relighter.solve(&Progress::hidden());
-    let mut at = 0;
+    // A new place each relight: no earlier state is of the same place.
+    let (mut draw, mut at) = (0, 0.0);
     group.bench_function("default_preset_point_light_move", |b| {
         b.iter(|| {
-            at = 1 - at;
+            draw += 1;
+            at = uniform(draw);
             relighter
                 .set_analytic_light(0, point_light(at))
                 .expect("valid light");
@@ -175,11 +189,11 @@ fn arbitrary(c: &mut Criterion, name: &str, scene: &Scene) {
 
 fn relight(c: &mut Criterion) {
     let (name, scene) = bench_scene();
-    // Two neighbouring frames in the middle of the sweep; each relight steps to the other one.
-    let frames = [
-        sweep_emission(&scene, SWEEP_FRAMES / 2),
-        sweep_emission(&scene, SWEEP_FRAMES / 2 + 1),
-    ];
+    // The sweep's frames after the first; each relight steps to the next one (after the last,
+    // back to the first of them).
+    let frames: Vec<Vec<[f64; 3]>> = (1..SWEEP_FRAMES)
+        .map(|frame| sweep_emission(&scene, frame))
+        .collect();
     let mut group = c.benchmark_group(format!("relight/{name}/{}", scene.len()));
     group.sample_size(10);
     group.warm_up_time(Duration::from_secs(1));
@@ -206,7 +220,7 @@ fn relight(c: &mut Criterion) {
         group.bench_function(format!("{preset}_preset_sweep_step"), |b| {
             b.iter(|| {
                 let relit = relighter.relight(&frames[next]).expect("valid emission");
-                next = 1 - next;
+                next = (next + 1) % frames.len();
                 relit.solution.stats.iterations
             })
         });

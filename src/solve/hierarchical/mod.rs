@@ -103,7 +103,8 @@ pub struct Prepared {
 }
 
 /// The solver's state over the elements after a solve: radiance per element and antiradiance per
-/// element and bin, the source it was solved for and where its iteration stood. Pass it back to
+/// element and bin, the source it was solved for, where its iteration stood and the states of
+/// the solves before it for other sources (up to [`WARM_BASES`] in all). Pass it back to
 /// [`Prepared::solve_with_source`] to warm-start the next solve of the same [`Prepared`] scene,
 /// or to [`Prepared::resume_with_source`] to go on with the iteration (interactive relighting).
 #[derive(Clone, Debug, Default)]
