@@ -173,7 +173,6 @@ impl Prepared {
             same_source,
             same_source_len,
         } = self.start_state::<C>(elem_source, warm);
-        let earlier = earlier_states(warm, matched && same_source_len, same_source);
         let resume = resume.filter(|_| matched);
         let (resume, going_on) = match resume {
             Some(r) if same_source => (Some(r), true),
@@ -199,6 +198,8 @@ impl Prepared {
             rho_max,
             (&mut stats, &mut convergence),
         );
+        let earlier =
+            self.kept_states(warm, (matched && same_source_len, same_source), &mut memory);
         let mut two_back = self.two_sweep_copy(
             anderson.is_none(),
             &mut memory,
@@ -367,6 +368,45 @@ impl Prepared {
         }
         memory.estimate_bytes += bytes;
         Some((radiance.to_vec(), radiance_back.to_vec(), anti.to_vec()))
+    }
+
+    /// The earlier states the state of a solve warm-started from `warm` keeps
+    /// ([`ElementState`]'s `earlier`): `warm`'s own when the solve goes on with the same
+    /// source, `warm` itself and its most recent earlier ones when the source changed
+    /// (`usable`: `warm` belongs to this scene and was solved for a source of this length),
+    /// none otherwise; the most recent first, as many as fit what the memory limit leaves
+    /// beside `memory`'s estimate, which then counts them.
+    fn kept_states(
+        &self,
+        warm: Option<&ElementState>,
+        (usable, same_source): (bool, bool),
+        memory: &mut MemoryStats,
+    ) -> Vec<std::sync::Arc<ElementState>> {
+        let Some(w) = warm.filter(|_| usable) else {
+            return Vec::new();
+        };
+        let candidates: Vec<std::sync::Arc<ElementState>> = if same_source {
+            w.earlier.clone()
+        } else {
+            let mut kept = w.earlier.clone();
+            kept.truncate(WARM_BASES.saturating_sub(2));
+            // The warm state itself is copied only when it fits.
+            if w.bytes() > self.budget.spare(memory.estimate_bytes) {
+                return Vec::new();
+            }
+            kept.insert(0, std::sync::Arc::new(w.without_history()));
+            kept
+        };
+        let mut kept = Vec::new();
+        for state in candidates {
+            let bytes = state.bytes();
+            if bytes > self.budget.spare(memory.estimate_bytes) {
+                break;
+            }
+            memory.estimate_bytes += bytes;
+            kept.push(state);
+        }
+        kept
     }
 
     /// Builds the pair cache of a solve without one (its factors did not fit
@@ -876,24 +916,5 @@ impl Prepared {
             earlier,
         };
         (solution, state)
-    }
-}
-
-/// The earlier states the state of a solve warm-started from `warm` keeps
-/// ([`ElementState`]'s `earlier`): `warm`'s own when the solve goes on with the same source,
-/// `warm` itself and its most recent earlier ones when the source changed (`usable`: `warm`
-/// belongs to this scene and was solved for a source of this length), none otherwise.
-fn earlier_states(
-    warm: Option<&ElementState>,
-    usable: bool,
-    same_source: bool,
-) -> Vec<std::sync::Arc<ElementState>> {
-    match warm {
-        Some(w) if usable && same_source => w.earlier.clone(),
-        Some(w) if usable => std::iter::once(std::sync::Arc::new(w.without_history()))
-            .chain(w.earlier.iter().cloned())
-            .take(WARM_BASES - 1)
-            .collect(),
-        _ => Vec::new(),
     }
 }

@@ -163,6 +163,14 @@ struct Resume {
 type ChannelState<const C: usize> = (Vec<[f64; C]>, Vec<[f64; C]>, Vec<[f32; C]>);
 
 impl ElementState {
+    /// Bytes of this state's radiance, antiradiance and source (not its earlier states).
+    fn bytes(&self) -> u64 {
+        (std::mem::size_of_val(self.radiance.as_slice())
+            + std::mem::size_of_val(self.radiance_back.as_slice())
+            + std::mem::size_of_val(self.anti.as_slice())
+            + std::mem::size_of_val(self.source.as_slice())) as u64
+    }
+
     /// This state without its iteration and earlier states: what a later state keeps of it.
     fn without_history(&self) -> ElementState {
         ElementState {

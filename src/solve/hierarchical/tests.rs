@@ -349,3 +349,51 @@ fn warm_factors_leave_out_sources_that_add_nothing_independent() {
     let zero = [[0.0; 2]; 3];
     assert_eq!(warm_factors(&new, &[&zero], &area)[0], [1.0; 2]);
 }
+
+/// A warm-started solve keeps the states of the solves before it, up to [`WARM_BASES`] in
+/// all, and none that the memory limit does not leave room for.
+#[test]
+fn warm_states_keep_their_predecessors_within_the_memory_limit() {
+    let patches = build_patches(&generated::cornell_box(), Some(100.0));
+    let options = SolverOptions {
+        direct_light: false,
+        ..SolverOptions::default()
+    };
+    let hidden = Progress::hidden();
+    let solve_chain = |prepared: &mut Prepared| {
+        let n = prepared.faces().count();
+        let mut state: Option<ElementState> = None;
+        for k in 0..4 {
+            // Each source a different mix of the emitters and one glowing face.
+            let source: Vec<[f64; 3]> = prepared
+                .faces()
+                .enumerate()
+                .map(|(e, f)| {
+                    let emitted = patches.emission[f.patch as usize];
+                    let glow = if e == k * n / 5 { 0.5 } else { 0.0 };
+                    emitted.map(|x| x * (1.0 + 0.1 * k as f64) + glow)
+                })
+                .collect();
+            let (solution, next) =
+                prepared.solve_with_source(&patches, &source, state.as_ref(), &hidden);
+            assert!(solution.stats.converged);
+            state = Some(next);
+        }
+        state.map_or(0, |s| s.earlier.len())
+    };
+    let mut roomy = match Prepared::new(&patches, &options, false) {
+        Ok(prepared) => prepared,
+        Err(e) => panic!("the box does not fit: {e}"),
+    };
+    assert_eq!(solve_chain(&mut roomy), WARM_BASES - 1);
+    // No room beside the solve's own estimate: nothing kept, and the solves still converge.
+    let mut tight = match Prepared::new(&patches, &options, false) {
+        Ok(prepared) => prepared,
+        Err(e) => panic!("the box does not fit: {e}"),
+    };
+    tight.budget = crate::memory::Budget {
+        limit: tight.memory.estimate_bytes,
+        base: 0,
+    };
+    assert_eq!(solve_chain(&mut tight), 0);
+}
