@@ -1,5 +1,7 @@
 //! Interactive relighting: build the hierarchy and links of a scene once, then re-solve it for
-//! new lighting as often as needed, each solve warm-started from the previous one.
+//! new lighting as often as needed, each solve warm-started from the previous ones (the
+//! combination of the last [`crate::solve::hierarchical::WARM_BASES`] solutions whose sources
+//! come closest to the new source).
 //!
 //! Links, form factors and antiradiance couplings depend only on geometry, albedo and solver
 //! options, never on the lights (the equations are linear in the source). A [`Relighter`]
