@@ -385,26 +385,31 @@ impl Prepared {
         let Some(w) = warm.filter(|_| usable) else {
             return Vec::new();
         };
-        let candidates: Vec<std::sync::Arc<ElementState>> = if same_source {
-            w.earlier.clone()
-        } else {
-            let mut kept = w.earlier.clone();
-            kept.truncate(WARM_BASES.saturating_sub(2));
-            // The warm state itself is copied only when it fits.
-            if w.bytes() > self.budget.spare(memory.estimate_bytes) {
-                return Vec::new();
+        let budget = &self.budget;
+        let mut fits = |bytes: u64| {
+            let fits = bytes <= budget.spare(memory.estimate_bytes);
+            if fits {
+                memory.estimate_bytes += bytes;
             }
-            kept.insert(0, std::sync::Arc::new(w.without_history()));
-            kept
+            fits
         };
         let mut kept = Vec::new();
-        for state in candidates {
-            let bytes = state.bytes();
-            if bytes > self.budget.spare(memory.estimate_bytes) {
+        // A new source keeps the warm state itself first (copied only when it fits).
+        if !same_source {
+            if !fits(w.bytes()) {
+                return kept;
+            }
+            kept.push(std::sync::Arc::new(w.without_history()));
+        }
+        for state in w
+            .earlier
+            .iter()
+            .take((WARM_BASES - 1).saturating_sub(kept.len()))
+        {
+            if !fits(state.bytes()) {
                 break;
             }
-            memory.estimate_bytes += bytes;
-            kept.push(state);
+            kept.push(std::sync::Arc::clone(state));
         }
         kept
     }

@@ -82,12 +82,17 @@ impl SweepContext<'_> {
         }
     }
 
-    /// The direction of cluster link `l` (unit, from its sender's centroid to its receiver's),
-    /// along which [`Self::pull`] measures its intensity.
+    /// The vector of cluster link `l`, from its sender's centroid to its receiver's.
+    #[inline]
+    fn link_vector(&self, l: &ClusterLink) -> DVec3 {
+        self.points[l.receiver as usize].centroid() - self.points[l.sender as usize].centroid()
+    }
+
+    /// The direction of cluster link `l` (unit, [`Self::link_vector`]), along which
+    /// [`Self::pull`] measures its intensity.
     #[inline]
     pub(super) fn link_direction(&self, l: &ClusterLink) -> DVec3 {
-        (self.points[l.receiver as usize].centroid() - self.points[l.sender as usize].centroid())
-            .normalize_or_zero()
+        self.link_vector(l).normalize_or_zero()
     }
 
     /// A flat sender's unit normal and its cosine along cluster link `l`
@@ -182,8 +187,7 @@ impl SweepContext<'_> {
     ) -> [f32; C] {
         // The terms are summed along the unnormalized direction and scaled once at the end: the
         // square root and division then overlap the sums instead of delaying every term.
-        let w =
-            self.points[l.receiver as usize].centroid() - self.points[l.sender as usize].centroid();
+        let w = self.link_vector(l);
         let length = w.length();
         if !(length > 0.0) || !length.is_finite() {
             return [0.0; C];
