@@ -56,9 +56,10 @@ impl Anderson {
         }
     }
 
-    /// Bytes the history holds at its fullest.
+    /// Bytes the history holds at its fullest: two f32 differences per remembered sweep and
+    /// four f64 vectors (weights, residual, previous residual, previous output).
     pub fn bytes(n: usize, depth: usize) -> u64 {
-        (n as u64) * (4 * 2 * depth as u64 + 8 * 3)
+        (n as u64) * (4 * 2 * depth as u64 + 8 * 4)
     }
 
     /// Entries of the vectors it mixes.

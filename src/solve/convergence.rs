@@ -161,7 +161,8 @@ impl Convergence {
     /// The factor `q / (1 - q)` by which to extrapolate the last sweep's change (`x += k (x_k -
     /// x_(k-1))`, the geometric tail of a linear iteration contracting by `q`), when the
     /// contraction ratio has settled: the last three ratios agree within 2% and lie in (0.05,
-    /// [`MAX_CONTRACTION`]), and three sweeps have passed since the last extrapolation. `None` otherwise.
+    /// [`MAX_CONTRACTION`]), closely enough to know the jump ([`JUMP_SPREAD`]), and three sweeps
+    /// have passed since the last extrapolation. `None` otherwise.
     ///
     /// The tail of a Jacobi iteration is dominated by one slowly decaying mode (for a closed
     /// room, the overall light level), so one extrapolation removes most of what many sweeps
@@ -179,7 +180,7 @@ impl Convergence {
         let last = &self.ratios[self.ratios.len() - 3..];
         let q = last[2];
         let settled = last.iter().all(|r| (r - q).abs() <= 0.02 * q);
-        if !(settled && q > 0.05 && q < MAX_CONTRACTION) {
+        if !(settled && q > 0.05 && q < MAX_CONTRACTION && known_jump(last, q)) {
             return None;
         }
         Some(self.jump(q, q))
@@ -199,8 +200,8 @@ impl Convergence {
     /// The factor `q2 / (1 - q2)` by which to extrapolate the change over the last two sweeps
     /// (`x += k (x_k - x_(k-2))`) when the two-sweep contraction has settled: the products of
     /// the last four ratios' consecutive pairs agree within [`TWO_SWEEP_SETTLED`] and `q2` lies in (0.05^2,
-    /// [`MAX_CONTRACTION`]), and four sweeps have passed since the last extrapolation. `None`
-    /// otherwise.
+    /// [`MAX_CONTRACTION`]), closely enough to know the jump ([`JUMP_SPREAD`]), and four sweeps
+    /// have passed since the last extrapolation. `None` otherwise.
     ///
     /// Over two sweeps a mode that changes sign (ratio -q) decays as one that does not (ratio
     /// q): both are q^2, and the jump removes both, where the one-sweep jump of
@@ -221,11 +222,39 @@ impl Convergence {
         // Every sweep contracted: a growing sweep (ratio 1.2) beside a shrinking one is not a
         // steady two-sweep contraction, and ratios held at the cap would jump by 1/(1 - 0.9998).
         let contracting = r.iter().all(|&q| q < MAX_CONTRACTION);
-        if !(settled && contracting && q2 > 0.0025 && q2 < MAX_CONTRACTION) {
+        if !(settled
+            && contracting
+            && q2 > 0.0025
+            && q2 < MAX_CONTRACTION
+            && known_jump(&pairs, q2))
+        {
             return None;
         }
         Some(self.jump(q2, q2.sqrt()))
     }
+}
+
+/// Largest spread of the settled ratios, as a fraction of `1 - q`, at which a jump by
+/// `q / (1 - q)` is taken ([`known_jump`]).
+///
+/// When `q` moves by `d`, the jump's factor moves by `d / (q (1 - q))` of itself, so ratios
+/// settled within 2% pin it down at 0.5 (to 4%) but not at 0.99 (to 200%): there the same
+/// ratios are as well a stall or a slow growth that a projected sweep holds (ratios about 1,
+/// some above), and a jump throws the state far off. b90_office two-sided without Anderson
+/// mixing (at a 3 GB limit) plateaued at changes of about 7e-3 and jumped at ratios just under
+/// 1 thirteen times, most jumps followed by a change of 0.5 to 2.3, until it was failed as
+/// diverged at sweep 330; without those jumps it is failed at sweep 82 (its damped sweeps do
+/// not converge: Anderson mixing does, docs/stability.md). A steady contraction, however slow
+/// (ratios of 0.99 within 1e-4), still jumps.
+pub const JUMP_SPREAD: f64 = 0.25;
+
+/// True when `ratios` (contraction ratios, or products of two, settled at `q`) all contract
+/// and spread by at most [`JUMP_SPREAD`] times `1 - q` about `q`: a jump by `q / (1 - q)` is
+/// then known to about a quarter of itself.
+fn known_jump(ratios: &[f64], q: f64) -> bool {
+    ratios
+        .iter()
+        .all(|&r| r < 1.0 && (r - q).abs() <= JUMP_SPREAD * (1.0 - q))
 }
 
 /// Relative spread within which the products of consecutive contraction ratios count as
@@ -480,6 +509,25 @@ mod tests {
         for steps in [&[1.2][..], &[0.5, 1.9]] {
             assert_eq!(jumps(steps, 12), [], "{steps:?}");
         }
+    }
+
+    /// Residuals that stall about a level (ratios 1.005, 0.99, 0.995, 1.0 in turn, each within
+    /// 2% of the last: a projected sweep holding a slowly growing mode) never jump; a contraction
+    /// as slow but steady (0.99 every sweep) jumps by 99. Before [`JUMP_SPREAD`] the stall jumped
+    /// by 199 after three sweeps.
+    #[test]
+    fn a_stall_near_ratio_one_does_not_extrapolate() {
+        let stall = [1.005, 0.99, 0.995, 1.0];
+        for k in 0..stall.len() {
+            let window: Vec<f64> = stall.iter().cycle().skip(k).take(3).copied().collect();
+            assert!(window
+                .iter()
+                .all(|r| (r - window[2]).abs() <= 0.02 * window[2]));
+        }
+        assert_eq!(jumps(&stall, 40), []);
+        let steady = jumps(&[0.99], 6);
+        assert_eq!(steady.len(), 1, "{steady:?}");
+        assert!((steady[0].2 - 99.0).abs() < 1e-6, "{steady:?}");
     }
 
     /// Residuals contracting by a steady 0.5: one jump once three ratios agree, by q / (1 - q).
