@@ -117,9 +117,20 @@ bench() {
 # performance.md, "Relighting".
 relight() {
   have "$ROOM" || return 0
-  "$B" relight "$ROOM" "${ROOM_OPTS[@]}" --frames 8 --out "$OUT/frames_default" --quiet --report "$OUT/relight_default.json"
-  "$B" relight "$ROOM" "${ROOM_OPTS[@]}" --preset fast --frames 8 --out "$OUT/frames_fast" --quiet --report "$OUT/relight_fast.json"
-  "$B" relight "$ROOM" "${ROOM_OPTS[@]}" --frames 8 --bands 8 --out "$OUT/frames_bands" --quiet --report "$OUT/relight_bands.json"
+  local point=(--albedo 0.75 --light point:2,2,1:20,20,20)
+  # The table: each mode twice, to the tolerance and with a 100 ms budget per frame.
+  for i in 1 2; do
+    for budget in "" 100; do
+      local b=() tag=$i
+      [ -n "$budget" ] && b=(--frame-budget "$budget") && tag=budget_$i
+      "$B" relight "$ROOM" "${ROOM_OPTS[@]}" --frames 30 "${b[@]}" --errors --out "$OUT/f" --quiet --report "$OUT/relight_sweep_$tag.json"
+      "$B" relight "$ROOM" "${point[@]}" --move-light 0:-3,2.5,-2 --frames 30 "${b[@]}" --errors --out "$OUT/f" --quiet --report "$OUT/relight_move_$tag.json"
+      "$B" relight "$ROOM" "${point[@]}" --scale-light 0:0.25 --frames 30 "${b[@]}" --errors --out "$OUT/f" --quiet --report "$OUT/relight_dim_$tag.json"
+    done
+  done
+  "$B" relight "$ROOM" "${ROOM_OPTS[@]}" --frames 40 --hold 10 --frame-budget 100 --errors --out "$OUT/f" --quiet --report "$OUT/relight_sweep_prog.json"
+  "$B" relight "$ROOM" "${point[@]}" --move-light 0:-3,2.5,-2 --frames 40 --hold 10 --frame-budget 100 --errors --out "$OUT/f" --quiet --report "$OUT/relight_move_prog.json"
+  "$B" relight "$ROOM" "${point[@]}" --scale-light 0:0.25 --frames 40 --hold 10 --frame-budget 100 --errors --out "$OUT/f" --quiet --report "$OUT/relight_dim_prog.json"
   cargo bench --bench relight > "$OUT/bench_relight.log" 2>&1
 }
 
