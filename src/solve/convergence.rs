@@ -234,8 +234,9 @@ impl Convergence {
     }
 }
 
-/// Largest spread of the settled ratios, as a fraction of `1 - q`, at which a jump by
-/// `q / (1 - q)` is taken ([`known_jump`]).
+/// Largest spread of the settled ratios about `q`, as a fraction of `1 - q`, at which a jump
+/// by `q / (1 - q)` is taken ([`Convergence::extrapolation_factor`],
+/// [`Convergence::two_sweep_factor`]); every ratio must also be below 1.
 ///
 /// When `q` moves by `d`, the jump's factor moves by `d / (q (1 - q))` of itself, so ratios
 /// settled within 2% pin it down at 0.5 (to 4%) but not at 0.99 (to 200%): there the same
@@ -250,7 +251,8 @@ pub const JUMP_SPREAD: f64 = 0.25;
 
 /// True when `ratios` (contraction ratios, or products of two, settled at `q`) all contract
 /// and spread by at most [`JUMP_SPREAD`] times `1 - q` about `q`: a jump by `q / (1 - q)` is
-/// then known to about a quarter of itself.
+/// then known to about a quarter of itself where this bound is the tighter one (q above about
+/// 0.93; below, the 2% agreement of the ratios is).
 fn known_jump(ratios: &[f64], q: f64) -> bool {
     ratios
         .iter()
