@@ -106,40 +106,19 @@ impl SweepContext<'_> {
         let first = fields.near_end[fields.node[f] as usize] as usize;
         for j in fields.slot_links(f, s) {
             let i = intensity[j].map(f64::from);
-            let mut add = |t: &[f64], a_t: &[f64]| {
-                for (acc, t) in irr.iter_mut().zip(t) {
-                    for c in 0..C {
-                        acc[c] += t * i[c];
-                    }
-                }
-                if with_anti {
-                    for (acc, t) in a.iter_mut().zip(a_t) {
-                        for c in 0..C {
-                            acc[c] += t * i[c];
-                        }
-                    }
-                }
-            };
             if cached {
                 // Widened term by term: a widened copy of the 40 terms cost more than the sums.
                 let t = &fields.terms[fields.term_start[f] as usize + (j - first)];
-                for (acc, &t) in irr.iter_mut().zip(&t[..IRR_TERMS]) {
-                    let t = f64::from(t);
-                    for c in 0..C {
-                        acc[c] += t * i[c];
-                    }
-                }
+                add_terms(irr, &t[..IRR_TERMS], &i);
                 if with_anti {
-                    for (acc, &t) in a.iter_mut().zip(&t[IRR_TERMS..]) {
-                        let t = f64::from(t);
-                        for c in 0..C {
-                            acc[c] += t * i[c];
-                        }
-                    }
+                    add_terms(&mut a, &t[IRR_TERMS..], &i);
                 }
             } else {
                 let (t, a_t) = self.link_terms(fields, links, (f, s, j), with_anti);
-                add(&t, &a_t);
+                add_terms(irr, &t, &i);
+                if with_anti {
+                    add_terms(&mut a, &a_t, &i);
+                }
             }
         }
         a.map(|x| x.map(|y| y as f32))
@@ -393,4 +372,17 @@ fn irradiance_weights(n: DVec3, dx: DVec3) -> [f64; IRR_TERMS] {
         }
     }
     w
+}
+
+/// Adds each term (per unit of a link's intensity; f32 as cached, f64 as computed) times the
+/// link's intensity `i` to its sum in `acc`, widening the term to f64 first.
+#[inline(always)]
+#[allow(clippy::needless_range_loop)]
+fn add_terms<T: Copy + Into<f64>, const C: usize>(acc: &mut [[f64; C]], terms: &[T], i: &[f64; C]) {
+    for (acc, &t) in acc.iter_mut().zip(terms) {
+        let t: f64 = t.into();
+        for c in 0..C {
+            acc[c] += t * i[c];
+        }
+    }
 }
