@@ -203,7 +203,7 @@ impl Budget {
 }
 
 /// An estimate with its slack (see `SLACK_DIVISOR`).
-fn with_slack(bytes: u64) -> u64 {
+pub(crate) fn with_slack(bytes: u64) -> u64 {
     bytes
         .saturating_add(bytes / SLACK_DIVISOR)
         .saturating_add(SLACK_BYTES)

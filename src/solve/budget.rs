@@ -11,10 +11,16 @@
 //!   estimated from the exact pair count before they are computed and counted while they are;
 //!   the per-sweep state from elements x stored bins once the live bins are known (until the
 //!   links are known, the sender groups per element are those of the tree before refinement);
-//! - the pair cache and the Anderson history, which only buy speed, get what is left;
+//! - the Anderson history is part of the fit while a coarser model remains ([`coarser`]): a
+//!   model fits only with its history beside it (b90_office two-sided at 3 GB had fitted at
+//!   epsilon 8 without it, and its damped sweeps diverged at sweep 82; with it the model is
+//!   coarsened to split depth 0 and converges in 34 sweeps). The coarsest model fits without
+//!   it, and its solve extrapolates instead;
+//! - the pair cache and the field links' cached terms, which only buy speed, get what is left;
 //! - the exact direct light ([`direct_light_bytes`]) is skipped when it does not fit beside the
 //!   model without the solve's state ([`HierarchicalCosts::state_bytes`]), which is allocated
-//!   once the direct light is freed: the estimate counts the larger of the two;
+//!   once the direct light is freed, with the Anderson history and the direct light's result:
+//!   the estimate counts the larger of the two;
 //! - the dense solver ([`dense_bytes`]) refuses with [`crate::Error::Memory`] when it does not fit.
 //!
 //! When the hierarchical model does not fit, [`Prepared::new`](crate::solve::hierarchical::Prepared::new)

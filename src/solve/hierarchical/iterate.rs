@@ -73,11 +73,6 @@ struct Window<const C: usize> {
 }
 
 impl<const C: usize> Window<C> {
-    /// Bytes of the window's copy of a state of `n` elements with `backs` back faces.
-    fn bytes(n: usize, backs: usize) -> u64 {
-        ((n + backs) * std::mem::size_of::<[f32; C]>()) as u64
-    }
-
     /// Counts a sweep whose output is `radiance` and `radiance_back` (per element, empty when
     /// no element is two-sided); every [`crate::solve::convergence::WINDOW_SWEEPS`] sweeps
     /// returns the net relative change since the window's start, area-weighted L1 as the
@@ -693,9 +688,7 @@ impl Prepared {
         // with the largest albedo as the contraction bound instead.
         let state_len = state_len_of::<C>(n + backs, slots);
         let depth = options.acceleration_depth;
-        let history = Anderson::bytes(state_len, depth)
-            + 16 * state_len as u64
-            + Window::<C>::bytes(n, backs);
+        let history = self.history_bytes(C);
         let mb = |bytes: u64| bytes.div_ceil(1 << 20);
         let off = if depth == 0 {
             Some("acceleration_depth 0".to_string())
@@ -705,14 +698,15 @@ impl Prepared {
                 mb(history),
                 mb(ACCELERATION_BUDGET_BYTES)
             ))
-        } else if history > self.budget.spare(memory.estimate_bytes) {
+        } else if history > self.budget.spare(self.sweep_bytes) {
             memory.coarsened.push("Anderson acceleration off".into());
             Some(format!(
                 "Anderson history of {} MB over what the memory limit leaves",
                 mb(history)
             ))
         } else {
-            memory.estimate_bytes += history;
+            // The history lives through the sweeps, after the exact direct light is freed.
+            memory.estimate_bytes = memory.estimate_bytes.max(self.sweep_bytes + history);
             None
         };
         let accelerate = off.is_none();
@@ -739,6 +733,23 @@ impl Prepared {
             Anderson::new(depth, weight)
         });
         (anderson, acceleration)
+    }
+
+    /// Bytes of the Anderson history of a solve in `channels` channels at
+    /// [`SolverOptions::acceleration_depth`]: the history itself
+    /// ([`Anderson::bytes`]), the two flat copies of the state it mixes (f64 each) and the
+    /// start of the convergence window.
+    pub(super) fn history_bytes(&self, channels: usize) -> u64 {
+        self.history_bytes_with(self.live.slots(), channels)
+    }
+
+    /// [`Self::history_bytes`] with `slots` stored bins.
+    pub(super) fn history_bytes_with(&self, slots: usize, channels: usize) -> u64 {
+        let (n, backs) = (self.element_count(), self.elem_two.len());
+        let state_len = (n + backs + slots) * channels;
+        Anderson::bytes(state_len, self.options.acceleration_depth)
+            + 16 * state_len as u64
+            + ((n + backs) * channels * size_of::<f32>()) as u64
     }
 
     /// One Jacobi sweep from the state `from` into `to`: sender summaries, pull, gather.

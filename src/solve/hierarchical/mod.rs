@@ -96,6 +96,10 @@ pub struct Prepared {
     /// The part of the estimate a solve allocates when it starts and frees when it ends
     /// ([`crate::solve::budget::HierarchicalCosts::state_bytes`] and the fields' sums).
     state_bytes: u64,
+    /// The estimate of the model through the sweeps, beside which the Anderson history must
+    /// fit: the model's estimate with the solve's state and the exact direct light's result
+    /// (not its working memory, freed before the sweeps start).
+    sweep_bytes: u64,
     /// What the memory budget did: limit, estimate, what was coarsened.
     memory: MemoryStats,
     /// Build timings.
@@ -295,6 +299,7 @@ impl Prepared {
     /// which lives through the sweeps.
     pub(crate) fn note_direct_light(&mut self, bytes: u64, faces: u64) {
         self.memory.estimate_bytes += bytes.saturating_sub(self.state_bytes).max(faces * 24);
+        self.sweep_bytes += faces * 24;
     }
 
     /// Counts `bytes` more in the model's estimate and, when something was left out to fit,

@@ -55,8 +55,9 @@ impl BaseTree {
 impl Prepared {
     /// Builds the tree and refines the links for `patches` within the memory limit of
     /// `options` ([`SolverOptions::memory_limit_bytes`], see [`crate::solve::budget`]): a model whose
-    /// estimate does not fit is coarsened step by step ([`budget::coarser`]; the pair cache is
-    /// left out first), and [`Prepared::memory`] says what was changed. `record_culled` keeps
+    /// estimate does not fit (with its Anderson history, unless it is the coarsest) is
+    /// coarsened step by step ([`budget::coarser`]; the pair cache is left out first), and
+    /// [`Prepared::memory`] says what was changed. `record_culled` keeps
     /// the culled pairs (for [`links::validate`]).
     ///
     /// Errors: [`crate::Error::Memory`] when even the coarsest model does not fit (raised
@@ -67,6 +68,16 @@ impl Prepared {
         record_culled: bool,
     ) -> Result<Prepared> {
         let budget = Budget::start(options.memory_limit());
+        Prepared::within(patches, options, record_culled, budget)
+    }
+
+    /// [`Prepared::new`] within `budget` (the limit and what the process held before).
+    pub(super) fn within(
+        patches: &Patches,
+        options: &SolverOptions,
+        record_culled: bool,
+        budget: Budget,
+    ) -> Result<Prepared> {
         let tree_bytes = HierarchicalCosts::tree_bytes(patches.len() as u64);
         if !budget.fits(tree_bytes) {
             return Err(budget.does_not_fit(
@@ -214,6 +225,7 @@ impl Prepared {
             options: options.clone(),
             budget: link_budget.budget,
             state_bytes: 0,
+            sweep_bytes: 0,
             memory: MemoryStats::default(),
             timings: HierarchyTimings {
                 tree: (t1 - t0).as_secs_f64(),
@@ -269,8 +281,8 @@ impl Prepared {
     }
 
     /// Sizes the model within the memory budget: the live bins and (when it fits its own
-    /// budget and what the model leaves) the pair cache, then the estimate of the whole, or
-    /// [`OverBudget`] when it does not fit.
+    /// budget and what the model and its Anderson history leave) the pair cache, then the
+    /// estimate of the whole, or [`OverBudget`] when it does not fit beside the history.
     fn fit_model(
         &mut self,
         patches: &Patches,
@@ -295,6 +307,20 @@ impl Prepared {
         };
         let costs = &link_budget.costs;
         let budget = &link_budget.budget;
+        // The Anderson history, reserved in the fit (and before the caches) while a coarser
+        // model is left to fall back on: a solve whose damped sweeps stall or diverge needs it
+        // more than it needs a finer model. The coarsest model fits without it. The exact
+        // direct light's result (24 bytes a face) lives beside it.
+        let channels = costs.channels() as usize;
+        let reserve = budget::coarser(options).is_some() && options.acceleration_depth > 0;
+        let history = |prepared: &Prepared, slots: u64| {
+            let bytes = prepared.history_bytes_with(slots as usize, channels);
+            if reserve && bytes <= ACCELERATION_BUDGET_BYTES {
+                bytes + 24 * (prepared.element_count() + prepared.elem_two.len()) as u64
+            } else {
+                0
+            }
+        };
         let build_live = |prepared: &Prepared| {
             if prepared.use_anti {
                 LiveBins::build(prepared)
@@ -307,7 +333,11 @@ impl Prepared {
         // is tried again with the bins the elements store).
         let own = options.pair_cache_mb as u64 * 1_000_000;
         let mut cache_dropped = false;
-        match PairCache::build(&*self, own.min(budget.spare(costs.bytes(&counts)))) {
+        let reserved = history(self, counts.slots.unwrap_or(0));
+        match PairCache::build(
+            &*self,
+            own.min(budget.spare(costs.bytes(&counts) + reserved)),
+        ) {
             Ok(cache) => {
                 self.pairs = Some(cache);
                 self.live = build_live(&*self);
@@ -316,7 +346,8 @@ impl Prepared {
                 self.live = build_live(&*self);
                 counts.slots = Some(self.live.slots() as u64);
                 if cache_bytes <= own {
-                    let spare = budget.spare(costs.bytes(&counts));
+                    let reserved = history(self, self.live.slots() as u64);
+                    let spare = budget.spare(costs.bytes(&counts) + reserved);
                     self.pairs = PairCache::build(&*self, own.min(spare)).ok();
                     cache_dropped = self.pairs.is_none();
                 }
@@ -330,21 +361,23 @@ impl Prepared {
         let pair_bytes = self.pairs.as_ref().map_or(0, PairCache::bytes);
         let held =
             |fields: &Fields| costs.bytes(&counts) + pair_bytes + fields.bytes() + sweep_sums;
+        let reserved = history(self, self.live.slots() as u64);
         // The field links' terms, as many fields' as fit what the pair cache left of its
         // budget.
         let terms_budget = own
             .saturating_sub(pair_bytes)
-            .min(budget.spare(held(&self.fields)));
+            .min(budget.spare(held(&self.fields) + reserved));
         if self.fields.links > 0 && terms_budget > 0 {
             let mut fields = std::mem::take(&mut self.fields);
             fields.cache_terms(&self.sweep_context(), &self.links, terms_budget);
             self.fields = fields;
         }
         let estimate = held(&self.fields);
-        if !budget.fits(estimate) {
+        if !budget.fits(estimate + reserved) {
             return Err(OverBudget { estimate });
         }
         self.memory.estimate_bytes = estimate;
+        self.sweep_bytes = estimate;
         self.state_bytes = costs.state_bytes(&counts) + sweep_sums;
         if cache_dropped {
             self.memory.coarsened.push("pair cache off".into());

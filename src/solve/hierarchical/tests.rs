@@ -397,3 +397,53 @@ fn warm_states_keep_their_predecessors_within_the_memory_limit() {
     };
     assert_eq!(solve_chain(&mut tight), 0);
 }
+
+/// A model that fits its memory limit only without its Anderson history gives way to it:
+/// the caches shrink or the model is coarsened until the history fits beside it, and the solve
+/// mixes its sweeps (b90_office two-sided at 3 GB had its history left out, and its damped
+/// sweeps diverged). Here the limit is the least the model with full caches fits without the
+/// history.
+#[test]
+fn a_model_that_fits_only_without_its_history_keeps_anderson() {
+    let patches = build_patches(&generated::subdivided_cornell_box(4_000), None);
+    let options = SolverOptions {
+        direct_light: false,
+        ..SolverOptions::default()
+    };
+    let roomy = crate::memory::Budget {
+        limit: 1 << 40,
+        base: 0,
+    };
+    let prepared = match Prepared::within(&patches, &options, false, roomy) {
+        Ok(prepared) => prepared,
+        Err(e) => panic!("the box does not fit: {e}"),
+    };
+    let channels = channels_needed(&patches);
+    let history = prepared.history_bytes(channels);
+    assert!(history > 0);
+    let tight = crate::memory::Budget {
+        limit: crate::memory::with_slack(prepared.memory.estimate_bytes),
+        base: 0,
+    };
+    assert!(tight.fits(prepared.memory.estimate_bytes));
+    assert!(!tight.fits(prepared.memory.estimate_bytes + history));
+    let mut fitted = match Prepared::within(&patches, &options, false, tight) {
+        Ok(prepared) => prepared,
+        Err(e) => panic!("the box does not fit: {e}"),
+    };
+    let with_history = fitted.memory.estimate_bytes + fitted.history_bytes(channels);
+    assert!(
+        tight.fits(with_history),
+        "{with_history} over {}",
+        tight.limit
+    );
+    let (solution, _) = fitted.solve(&patches, &Progress::hidden());
+    assert_eq!(solution.stats.acceleration, "anderson");
+    assert!(solution.stats.converged);
+    let memory = solution
+        .stats
+        .memory
+        .as_ref()
+        .map_or(0, |m| m.estimate_bytes);
+    assert!(tight.fits(memory), "{memory} over {}", tight.limit);
+}
