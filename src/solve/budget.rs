@@ -26,8 +26,9 @@
 //! When the hierarchical model does not fit, [`Prepared::new`](crate::solve::hierarchical::Prepared::new)
 //! coarsens it step by step, each step refining the links again on the same tree (its splits
 //! undone): the pair cache off first, then epsilon doubled up to
-//! [`MAX_COARSE_EPSILON`], then the split depth lowered by two down to 0, then two bins per side
-//! fewer down to [`MIN_COARSE_BINS`] ([`coarser`]).
+//! [`MAX_COARSE_EPSILON`], then two bins per side fewer down to [`MID_COARSE_BINS`], the split
+//! depth lowered by two down to [`MID_COARSE_SPLIT_DEPTH`], the bins down to
+//! [`MIN_COARSE_BINS`] and the split depth down to 0 ([`coarser`]).
 //! When even the coarsest model does not fit, the solve ends with [`crate::Error::Memory`] before the
 //! large arrays are allocated. What was coarsened is reported ([`MemoryStats`]).
 //!
@@ -54,6 +55,13 @@ pub const FIRST_COARSE_EPSILON: f64 = 0.25;
 /// Fewest bins per side coarsening lowers a model's bins to.
 pub const MIN_COARSE_BINS: usize = 4;
 
+/// Bins per side coarsening lowers a model's bins to before it lowers the split depth.
+pub const MID_COARSE_BINS: usize = 6;
+
+/// Split depth coarsening lowers a model's to before it lowers the bins below
+/// [`MID_COARSE_BINS`].
+pub const MID_COARSE_SPLIT_DEPTH: u8 = 2;
+
 /// Bins per side one coarsening step removes.
 const BIN_STEP: usize = 2;
 
@@ -69,15 +77,18 @@ const RAY_SCENE_BYTES_PER_PATCH: u64 = 256;
 const DIRECT_BYTES_PER_EMITTER: u64 = 1024;
 
 /// The next coarser hierarchical model after `options` and what changed (`"epsilon 1 -> 2"`,
-/// `"split depth 4 -> 2"`, `"bins 8x8 -> 6x6"`), or `None` when it is the coarsest: epsilon
-/// doubles (from 0 to [`FIRST_COARSE_EPSILON`]) up to [`MAX_COARSE_EPSILON`], then the split
-/// depth goes down by two to 0, then the bins per side go down by two to [`MIN_COARSE_BINS`].
-/// A value already beyond those limits is left as it is.
+/// `"bins 8x8 -> 6x6"`, `"split depth 4 -> 2"`), or `None` when it is the coarsest: epsilon
+/// doubles (from 0 to [`FIRST_COARSE_EPSILON`]) up to [`MAX_COARSE_EPSILON`]; then the bins
+/// per side go down by two to [`MID_COARSE_BINS`], the split depth by two to
+/// [`MID_COARSE_SPLIT_DEPTH`], the bins to [`MIN_COARSE_BINS`] and the split depth to 0. A
+/// value already beyond those limits is left as it is.
 ///
-/// Splits come before bins: the bins set the directional resolution of every shadow, the
-/// on-demand splits only refine large triangles next to small ones, and on a mesh of slivers
-/// they are what multiplies the exact pairs (the office mesh at epsilon 8: 38M cluster links
-/// and 17M exact pairs at split depth 4, 0.4M and 7.2M at depth 0).
+/// The order is the one that lost least accuracy for the memory it saved, measured at epsilon
+/// 8 against path-traced references (docs/performance.md, "Memory budget"): from 8x8 bins and
+/// split depth 4, 6x6 bins saved 19% of b90_office's estimate and 14% of the generated
+/// classroom's, at 2.73% -> 2.67% and 1.44% -> 1.84% from their references; split depth 2
+/// saved 6% and 27%, at 3.06% and 1.96%; split depth 0, the input mesh, 15% and 49%, at 3.65%
+/// and 5.66%: the large triangles beside small objects lose the resolution their shadows need.
 pub fn coarser(options: &SolverOptions) -> Option<(SolverOptions, String)> {
     let mut next = options.clone();
     if options.epsilon < MAX_COARSE_EPSILON {
@@ -89,20 +100,26 @@ pub fn coarser(options: &SolverOptions) -> Option<(SolverOptions, String)> {
         let step = format!("epsilon {} -> {}", options.epsilon, next.epsilon);
         return Some((next, step));
     }
-    if options.split_depth > 0 {
-        next.split_depth = options.split_depth.saturating_sub(SPLIT_STEP);
-        let step = format!(
-            "split depth {} -> {}",
-            options.split_depth, next.split_depth
-        );
-        return Some((next, step));
-    }
-    if options.bins > MIN_COARSE_BINS {
-        next.bins = options.bins.saturating_sub(BIN_STEP).max(MIN_COARSE_BINS);
-        let step = format!("bins {0}x{0} -> {1}x{1}", options.bins, next.bins);
-        return Some((next, step));
-    }
-    None
+    let bins_to = |floor: usize, next: &mut SolverOptions| {
+        (options.bins > floor).then(|| {
+            next.bins = options.bins.saturating_sub(BIN_STEP).max(floor);
+            format!("bins {0}x{0} -> {1}x{1}", options.bins, next.bins)
+        })
+    };
+    let split_to = |floor: u8, next: &mut SolverOptions| {
+        (options.split_depth > floor).then(|| {
+            next.split_depth = options.split_depth.saturating_sub(SPLIT_STEP).max(floor);
+            format!(
+                "split depth {} -> {}",
+                options.split_depth, next.split_depth
+            )
+        })
+    };
+    let step = bins_to(MID_COARSE_BINS, &mut next)
+        .or_else(|| split_to(MID_COARSE_SPLIT_DEPTH, &mut next))
+        .or_else(|| bins_to(MIN_COARSE_BINS, &mut next))
+        .or_else(|| split_to(0, &mut next))?;
+    Some((next, step))
 }
 
 /// What a solve's memory budget did, for the report's `stats.memory`.
@@ -214,7 +231,7 @@ mod tests {
     }
 
     #[test]
-    fn coarsening_doubles_epsilon_then_lowers_bins() {
+    fn coarsening_doubles_epsilon_then_lowers_bins_and_splits_in_turn() {
         let mut options = SolverOptions::default();
         let mut steps = Vec::new();
         while let Some((next, step)) = coarser(&options) {
@@ -227,10 +244,34 @@ mod tests {
                 "epsilon 1 -> 2",
                 "epsilon 2 -> 4",
                 "epsilon 4 -> 8",
-                "split depth 4 -> 2",
-                "split depth 2 -> 0",
                 "bins 8x8 -> 6x6",
-                "bins 6x6 -> 4x4"
+                "split depth 4 -> 2",
+                "bins 6x6 -> 4x4",
+                "split depth 2 -> 0",
+            ]
+        );
+        // The accurate preset's 12x12 bins come down to 6x6 first; odd values keep their step.
+        let mut options = SolverOptions {
+            epsilon: 8.0,
+            bins: 12,
+            split_depth: 5,
+            ..SolverOptions::default()
+        };
+        let mut steps = Vec::new();
+        while let Some((next, step)) = coarser(&options) {
+            steps.push(step);
+            options = next;
+        }
+        assert_eq!(
+            steps,
+            [
+                "bins 12x12 -> 10x10",
+                "bins 10x10 -> 8x8",
+                "bins 8x8 -> 6x6",
+                "split depth 5 -> 3",
+                "split depth 3 -> 2",
+                "bins 6x6 -> 4x4",
+                "split depth 2 -> 0",
             ]
         );
         let exact = SolverOptions {

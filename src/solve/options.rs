@@ -87,9 +87,10 @@ pub struct SolverOptions {
     /// the process holds when the solve starts (scene, patches) counts against it. The solvers
     /// estimate what they will allocate before they allocate it ([`crate::solve::budget`]): a
     /// hierarchical model that does not fit is coarsened (pair cache off, then epsilon doubled
-    /// up to [`crate::solve::budget::MAX_COARSE_EPSILON`], then the split depth lowered to 0, then
-    /// fewer bins down to [`crate::solve::budget::MIN_COARSE_BINS`] per side; see
-    /// [`crate::solve::budget::coarser`]), the exact direct light is skipped when it
+    /// up to [`crate::solve::budget::MAX_COARSE_EPSILON`], then fewer bins and a lower split
+    /// depth in turn down to [`crate::solve::budget::MIN_COARSE_BINS`] per side and 0; see
+    /// [`crate::solve::budget::coarser`]; while a coarser model remains, a model fits only with
+    /// its Anderson history), the exact direct light is skipped when it
     /// does not fit, and a solve that cannot fit even so (or a dense solve that does not fit)
     /// ends with [`Error::Memory`] before allocating; each change is reported. At least 1;
     /// `None` (the default) is half the machine's physical memory
