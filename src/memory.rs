@@ -179,9 +179,12 @@ impl Budget {
     }
 
     /// Bytes left for optional arrays (pair cache, acceleration history) once `committed`
-    /// bytes are estimated, slack included.
+    /// bytes are estimated: the most `x` for which `committed + x` still [`Budget::fits`], the
+    /// slack of `x` included.
     pub fn spare(&self, committed: u64) -> u64 {
-        self.available().saturating_sub(with_slack(committed))
+        let most =
+            self.available().saturating_sub(SLACK_BYTES) / (SLACK_DIVISOR + 1) * SLACK_DIVISOR;
+        most.saturating_sub(committed)
     }
 
     /// The one-line error for `what` whose estimate reached `bytes` (slack not included; a
@@ -226,6 +229,33 @@ mod tests {
             parse_status_field(meminfo, "MemTotal"),
             Some(24576000 * 1024)
         );
+    }
+
+    /// What `spare` leaves fits with its own slack, and a byte more than it would not (within
+    /// the rounding of the slack's division).
+    #[test]
+    fn the_spare_fits_with_its_slack() {
+        for (limit, base, committed) in [
+            (2u64 << 30, 22 << 20, 1_500_000_000u64),
+            (85_233_356, 0, 39_445_627),
+            (1 << 40, 1 << 20, 0),
+            (100 << 20, 0, 90 << 20),
+        ] {
+            let budget = Budget { limit, base };
+            let spare = budget.spare(committed);
+            if budget.fits(committed) {
+                assert!(
+                    budget.fits(committed + spare),
+                    "{limit} {committed} {spare}"
+                );
+                assert!(
+                    !budget.fits(committed + spare + 16),
+                    "{limit} {committed} {spare}"
+                );
+            } else {
+                assert_eq!(spare, 0);
+            }
+        }
     }
 
     #[test]

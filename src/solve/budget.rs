@@ -13,10 +13,11 @@
 //!   links are known, the sender groups per element are those of the tree before refinement);
 //! - the Anderson history is part of the fit while a coarser model remains ([`coarser`]): a
 //!   model fits only with its history beside it (b90_office two-sided at 3 GB had fitted at
-//!   epsilon 8 without it, and its damped sweeps diverged at sweep 82; with it the model is
-//!   coarsened to split depth 0 and converges in 34 sweeps). The coarsest model fits without
-//!   it, and its solve extrapolates instead;
-//! - the pair cache and the field links' cached terms, which only buy speed, get what is left;
+//!   epsilon 8 without it, and its damped sweeps diverged at sweep 82; with it the pair cache
+//!   is left out and it converges in 23 sweeps). The coarsest model fits without it, and its
+//!   solve extrapolates instead;
+//! - the pair cache and the field links' cached terms, which only buy speed, get what the
+//!   model, its fields' per-sweep sums and the history leave;
 //! - the exact direct light ([`direct_light_bytes`]) is skipped when it does not fit beside the
 //!   model without the solve's state ([`HierarchicalCosts::state_bytes`]), which is allocated
 //!   once the direct light is freed, with the Anderson history and the direct light's result:

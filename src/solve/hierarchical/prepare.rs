@@ -283,7 +283,7 @@ impl Prepared {
     /// Sizes the model within the memory budget: the live bins and (when it fits its own
     /// budget and what the model and its Anderson history leave) the pair cache, then the
     /// estimate of the whole, or [`OverBudget`] when it does not fit beside the history.
-    fn fit_model(
+    pub(super) fn fit_model(
         &mut self,
         patches: &Patches,
         link_budget: &LinkBudget,
@@ -328,12 +328,15 @@ impl Prepared {
                 LiveBins::empty(prepared.element_count(), prepared.bins.len())
             }
         };
-        // The pair cache, within its own budget and what the model leaves of the memory limit
-        // (with every bin counted; if it does not fit so, the live bins are found first and it
-        // is tried again with the bins the elements store).
+        // The pair cache, within its own budget and what the model, its fields and the history
+        // leave of the memory limit (with every bin counted; if it does not fit so, the live
+        // bins are found first and it is tried again with the bins the elements store).
         let own = options.pair_cache_mb as u64 * 1_000_000;
         let mut cache_dropped = false;
-        let reserved = history(self, counts.slots.unwrap_or(0));
+        // The fields and their per-sweep sums, every slot's until the live bins are known (an
+        // upper bound).
+        let fields_bytes = self.fields.bytes() + self.fields.sweep_bytes(channels);
+        let reserved = history(self, counts.slots.unwrap_or(0)) + fields_bytes;
         match PairCache::build(
             &*self,
             own.min(budget.spare(costs.bytes(&counts) + reserved)),
@@ -346,7 +349,7 @@ impl Prepared {
                 self.live = build_live(&*self);
                 counts.slots = Some(self.live.slots() as u64);
                 if cache_bytes <= own {
-                    let reserved = history(self, self.live.slots() as u64);
+                    let reserved = history(self, self.live.slots() as u64) + fields_bytes;
                     let spare = budget.spare(costs.bytes(&counts) + reserved);
                     self.pairs = PairCache::build(&*self, own.min(spare)).ok();
                     cache_dropped = self.pairs.is_none();

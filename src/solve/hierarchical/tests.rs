@@ -447,3 +447,60 @@ fn a_model_that_fits_only_without_its_history_keeps_anderson() {
         .map_or(0, |m| m.estimate_bytes);
     assert!(tight.fits(memory), "{memory} over {}", tight.limit);
 }
+
+/// The pair cache gets only what the model, its fields' per-sweep sums and the Anderson
+/// history leave: a model that fits without a cache is not refused for one (b90_office at
+/// 2 GB had its cache take the room of the fields' sums, and the model that fitted without the
+/// cache was coarsened a step further). The limit here leaves the cache more than the margin
+/// the model spares but less than that and the sums together.
+#[test]
+fn the_pair_cache_leaves_room_for_the_fields_sums() {
+    let patches = build_patches(&generated::subdivided_cornell_box(4_000), None);
+    let options = |pair_cache_mb| SolverOptions {
+        direct_light: false,
+        pair_cache_mb,
+        ..SolverOptions::default()
+    };
+    let roomy = crate::memory::Budget {
+        limit: 1 << 40,
+        base: 0,
+    };
+    let prepare = |options: &SolverOptions| match Prepared::within(&patches, options, false, roomy)
+    {
+        Ok(prepared) => prepared,
+        Err(e) => panic!("the box does not fit: {e}"),
+    };
+    let cached = prepare(&options(256));
+    let Some(cache_bytes) = cached.pairs.as_ref().map(PairCache::bytes) else {
+        panic!("no pair cache in a roomy budget");
+    };
+    let mut uncached = prepare(&options(0));
+    assert!(uncached.pairs.is_none() && uncached.fields.links > 0);
+    let channels = channels_needed(&patches);
+    let sums = uncached.fields.sweep_bytes(channels);
+    assert!(sums > cache_bytes / 2, "sums {sums}, cache {cache_bytes}");
+    let needed = uncached.memory.estimate_bytes + uncached.history_bytes(channels);
+    let margin = cache_bytes - sums / 2;
+    let tight = crate::memory::Budget {
+        limit: crate::memory::with_slack(needed + margin),
+        base: 0,
+    };
+    uncached.options.pair_cache_mb = 256;
+    let link_budget = LinkBudget {
+        costs: HierarchicalCosts::new(uncached.options.bins, channels),
+        budget: tight,
+        patches: patches.len() as u64,
+    };
+    if let Err(over) = uncached.fit_model(&patches, &link_budget) {
+        panic!(
+            "refused at {} for a limit of {}",
+            over.estimate, tight.limit
+        );
+    }
+    let with_history = uncached.memory.estimate_bytes + uncached.history_bytes(channels);
+    assert!(
+        tight.fits(with_history),
+        "{with_history} over {}",
+        tight.limit
+    );
+}
