@@ -102,6 +102,12 @@ impl Prepared {
             let t_attempt = Instant::now();
             let attempt = Prepared::build(patches, &model, record_culled, &link_budget, &mut base);
             let over = match attempt {
+                Ok(mut prepared) if attempts > 1 && !prepared.solve_fits_beside_held(channels) => {
+                    base.tree = std::mem::take(&mut prepared.tree);
+                    OverBudget {
+                        estimate: prepared.memory.estimate_bytes,
+                    }
+                }
                 Ok(mut prepared) => {
                     prepared.timings.tree += base.seconds;
                     coarsened.append(&mut prepared.memory.coarsened);
@@ -142,6 +148,34 @@ impl Prepared {
                 }
             }
         }
+    }
+
+    /// True when what the solve allocates once the model is built (its state and, where the
+    /// fit reserved it, the Anderson history) fits beside what the process holds now, or when
+    /// the model is the coarsest or the resident memory is unknown. The refinements that did
+    /// not fit leave memory the allocator keeps (the generated classroom at `--memory-limit
+    /// 600M`: 250 MiB resident between attempts against 20 MiB before them), and the solve's
+    /// large arrays do not reuse it: without this check the classroom peaked at 592 to 637 MiB
+    /// there, with it at 547 MiB (one step coarser).
+    pub(super) fn solve_fits_beside_held(&self, channels: usize) -> bool {
+        let Some(held) = crate::memory::current_rss_bytes() else {
+            return true;
+        };
+        if budget::coarser(&self.options).is_none() {
+            return true;
+        }
+        let history = self.history_bytes(channels);
+        let history = if self.options.acceleration_depth > 0 && history <= ACCELERATION_BUDGET_BYTES
+        {
+            history
+        } else {
+            0
+        };
+        let now = Budget {
+            limit: self.budget.limit,
+            base: held,
+        };
+        now.fits(self.state_bytes + history)
     }
 
     /// One attempt of [`Prepared::new`] with the model of `options`: tree (from `base`,

@@ -504,3 +504,38 @@ fn the_pair_cache_leaves_room_for_the_fields_sums() {
         tight.limit
     );
 }
+
+/// After refinements that did not fit, a model is kept only when the solve's state and history
+/// fit beside what the process holds then (the allocator keeps memory those refinements
+/// freed): not when the limit is what the process already holds, unless the model is the
+/// coarsest; always under a roomy limit.
+#[test]
+fn a_model_is_kept_only_when_its_solve_fits_beside_what_is_held() {
+    let Some(held) = crate::memory::current_rss_bytes() else {
+        return;
+    };
+    let patches = build_patches(&generated::cornell_box(), None);
+    let options = SolverOptions::default();
+    let roomy = crate::memory::Budget {
+        limit: 1 << 40,
+        base: 0,
+    };
+    let mut prepared = match Prepared::within(&patches, &options, false, roomy) {
+        Ok(prepared) => prepared,
+        Err(e) => panic!("the box does not fit: {e}"),
+    };
+    let channels = channels_needed(&patches);
+    assert!(prepared.solve_fits_beside_held(channels));
+    prepared.budget = crate::memory::Budget {
+        limit: held,
+        base: 0,
+    };
+    assert!(!prepared.solve_fits_beside_held(channels));
+    prepared.options = SolverOptions {
+        epsilon: budget::MAX_COARSE_EPSILON,
+        bins: budget::MIN_COARSE_BINS,
+        split_depth: 0,
+        ..options
+    };
+    assert!(prepared.solve_fits_beside_held(channels));
+}
