@@ -30,6 +30,9 @@
 //! [`MAX_COARSE_EPSILON`], then two bins per side fewer down to [`MID_COARSE_BINS`], the split
 //! depth lowered by two down to [`MID_COARSE_SPLIT_DEPTH`], the bins down to
 //! [`MIN_COARSE_BINS`] and the split depth down to 0 ([`coarser`]).
+//! After refinements that did not fit, a model is kept only when the solve's state and history
+//! fit beside the resident memory measured then: the allocator keeps what those refinements
+//! freed, and the solve's large arrays do not reuse it.
 //! When even the coarsest model does not fit, the solve ends with [`crate::Error::Memory`] before the
 //! large arrays are allocated. What was coarsened is reported ([`MemoryStats`]).
 //!
