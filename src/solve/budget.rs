@@ -234,16 +234,20 @@ mod tests {
         );
     }
 
-    #[test]
-    fn coarsening_doubles_epsilon_then_lowers_bins_and_splits_in_turn() {
-        let mut options = SolverOptions::default();
+    /// Every coarsening step from `options` to the coarsest model.
+    fn steps_from(mut options: SolverOptions) -> Vec<String> {
         let mut steps = Vec::new();
         while let Some((next, step)) = coarser(&options) {
             steps.push(step);
             options = next;
         }
+        steps
+    }
+
+    #[test]
+    fn coarsening_doubles_epsilon_then_lowers_bins_and_splits_in_turn() {
         assert_eq!(
-            steps,
+            steps_from(SolverOptions::default()),
             [
                 "epsilon 1 -> 2",
                 "epsilon 2 -> 4",
@@ -255,19 +259,13 @@ mod tests {
             ]
         );
         // The accurate preset's 12x12 bins come down to 6x6 first; odd values keep their step.
-        let mut options = SolverOptions {
-            epsilon: 8.0,
-            bins: 12,
-            split_depth: 5,
-            ..SolverOptions::default()
-        };
-        let mut steps = Vec::new();
-        while let Some((next, step)) = coarser(&options) {
-            steps.push(step);
-            options = next;
-        }
         assert_eq!(
-            steps,
+            steps_from(SolverOptions {
+                epsilon: 8.0,
+                bins: 12,
+                split_depth: 5,
+                ..SolverOptions::default()
+            }),
             [
                 "bins 12x12 -> 10x10",
                 "bins 10x10 -> 8x8",
