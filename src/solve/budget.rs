@@ -160,8 +160,9 @@ pub struct MemoryStats {
 
 /// Estimated bytes of the exact direct light for `patches` patches, `emitters` emitting patches
 /// and `receivers` receiving elements: the shadow-ray scene and the emitter groups, then per
-/// receiver its element, its unoccluded light from each emitter group that lights it (at most
-/// `groups`, at most `emitters` when `None`), its shadow-ray weight and its source.
+/// receiver its element, its unoccluded light from each emitter group that lights it (`groups`
+/// per receiver: [`crate::solve::direct::DirectLight::lights_per_receiver`], or every emitter
+/// when `None`), its shadow-ray weight and its source.
 pub fn direct_light_bytes(patches: u64, emitters: u64, receivers: u64, groups: Option<u64>) -> u64 {
     let groups = groups.unwrap_or(emitters);
     patches * RAY_SCENE_BYTES_PER_PATCH

@@ -138,6 +138,13 @@ struct Pass {
     seen: usize,
 }
 
+/// Most receivers [`DirectLight::lights_per_receiver`] samples.
+pub const LIGHTS_SAMPLE: usize = 1024;
+
+/// Factor on the sampled mean of groups per receiver in the direct light's memory estimate: 2
+/// for the vectors' growth by doubling, 1.5 for the sample's error.
+pub const LIGHTS_MARGIN: f64 = 3.0;
+
 /// Seed of the per-element random streams (fixed: the direct light is deterministic).
 const SEED: u64 = 0x5eed_d12e_c71d_0001;
 
@@ -354,6 +361,32 @@ impl<'a> DirectLight<'a> {
     /// Number of emitter groups (see `EmitterGroup`); at most the number of emitters.
     pub fn group_count(&self) -> usize {
         self.groups.len()
+    }
+
+    /// An upper estimate of the emitter groups each receiver's unoccluded light keeps (what
+    /// [`Self::reflected`] holds per receiver, 16 bytes a group): the mean over an even sample of
+    /// at most [`LIGHTS_SAMPLE`] of `receivers`, times [`LIGHTS_MARGIN`] (the vectors' growth and
+    /// the sample's error), at most every group. The bear lit by its own head: 20.8 groups per
+    /// receiver of 779 (357,880 in all, 512,764 allocated).
+    pub fn lights_per_receiver(&self, receivers: &[Element]) -> u64 {
+        let groups = self.groups.len() as u64;
+        if receivers.is_empty() || groups == 0 {
+            return 0;
+        }
+        let stride = receivers.len().div_ceil(LIGHTS_SAMPLE);
+        let sample: Vec<&Element> = receivers.iter().step_by(stride).collect();
+        let kept: usize = sample
+            .par_iter()
+            .map_init(
+                || (Vec::new(), Vec::new()),
+                |(lights, parts), r| {
+                    self.unoccluded(r, lights, parts);
+                    lights.len()
+                },
+            )
+            .sum();
+        let mean = kept as f64 / sample.len() as f64;
+        ((mean * LIGHTS_MARGIN).ceil() as u64).min(groups)
     }
 
     /// Mean over the receiver of `sum_s E_s F(x <- s)` without visibility: the emitters' light

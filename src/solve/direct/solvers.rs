@@ -75,26 +75,28 @@ pub(super) fn patch_receivers(patches: &Patches) -> Vec<Element> {
 /// The coarsening step recorded when the exact direct light does not fit the memory limit.
 pub const DIRECT_LIGHT_OFF: &str = "exact direct light off";
 
-/// The direct light of `patches` for `receivers` receivers when it fits `spare` bytes
+/// The direct light of `patches` for `receivers` when it fits `spare` bytes
 /// ([`budget::direct_light_bytes`]: the shadow-ray scene and emitter groups are estimated
-/// before they are built, each receiver's lights once the groups are known), with its estimate;
-/// `None` when it does not fit.
+/// before they are built, each receiver's lights once the groups are known, from a sample of
+/// the receivers, [`DirectLight::lights_per_receiver`]), with its estimate; `None` when it does
+/// not fit.
 pub(super) fn direct_within<'a>(
     patches: &'a Patches,
-    receivers: usize,
+    receivers: &[Element],
     spare: u64,
     back_faces: Option<&[bool]>,
 ) -> Option<(DirectLight<'a>, u64)> {
     let (p, e, r) = (
         patches.len() as u64,
         Emitters::count(patches) as u64,
-        receivers as u64,
+        receivers.len() as u64,
     );
     if budget::direct_light_bytes(p, e, 0, Some(0)) > spare {
         return None;
     }
-    let direct = DirectLight::with_back_faces(patches, receivers, back_faces);
-    let bytes = budget::direct_light_bytes(p, e, r, Some(direct.group_count() as u64));
+    let direct = DirectLight::with_back_faces(patches, receivers.len(), back_faces);
+    let lights = direct.lights_per_receiver(receivers);
+    let bytes = budget::direct_light_bytes(p, e, r, Some(lights));
     (bytes <= spare).then_some((direct, bytes))
 }
 
@@ -126,7 +128,7 @@ pub fn solve_hierarchical_direct(
     let back_faces = prepared.patches_with_back_faces(patches.len());
     let Some((direct, bytes)) = direct_within(
         patches,
-        receivers.len(),
+        &receivers,
         prepared.spare_bytes(),
         Some(&back_faces),
     ) else {
@@ -205,8 +207,7 @@ fn dense_direct_one_sided(
         }
         Ok(solution)
     };
-    let Some((direct, _)) =
-        direct_within(patches, receivers.len(), budget.spare(dense_bytes), None)
+    let Some((direct, _)) = direct_within(patches, &receivers, budget.spare(dense_bytes), None)
     else {
         return skip(Some(DIRECT_LIGHT_OFF));
     };

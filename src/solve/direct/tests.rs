@@ -184,6 +184,36 @@ mod budget_tests {
     use crate::mesh::build_patches;
     use crate::scene::generated;
 
+    /// The sampled groups per receiver bound what the receivers keep: with every third patch of
+    /// the 4k-triangle Cornell box emitting (many groups, each receiver lit by those in front
+    /// of it), the estimate is at least the mean kept and at most every group.
+    #[test]
+    fn sampled_lights_per_receiver_bound_what_receivers_keep() {
+        let mut scene = generated::subdivided_cornell_box(4_000);
+        for t in (0..scene.len()).step_by(3) {
+            scene.emission[t] = [1.0; 3];
+        }
+        let patches = build_patches(&scene, None);
+        let receivers = super::super::solvers::patch_receivers(&patches);
+        let direct = DirectLight::new(&patches, receivers.len());
+        let groups = direct.group_count() as u64;
+        let (mut lights, mut parts) = (Vec::new(), Vec::new());
+        let kept: usize = receivers
+            .iter()
+            .map(|r| {
+                direct.unoccluded(r, &mut lights, &mut parts);
+                lights.len()
+            })
+            .sum();
+        let mean = kept.div_ceil(receivers.len()) as u64;
+        let estimate = direct.lights_per_receiver(&receivers);
+        assert!(estimate >= mean, "estimate {estimate}, mean {mean}");
+        assert!(
+            groups > 8 && estimate <= groups,
+            "estimate {estimate}, groups {groups}"
+        );
+    }
+
     #[test]
     fn direct_light_budget_counts_receivers_times_groups() {
         let patches = build_patches(&generated::cornell_box(), None);
