@@ -367,11 +367,16 @@ impl<'a> DirectLight<'a> {
     /// [`Self::reflected`] holds per receiver, 16 bytes a group): the mean over an even sample of
     /// at most [`LIGHTS_SAMPLE`] of `receivers`, times [`LIGHTS_MARGIN`] (the vectors' growth and
     /// the sample's error), at most every group. The bear lit by its own head: 20.8 groups per
-    /// receiver of 779 (357,880 in all, 512,764 allocated).
+    /// receiver of 779 (357,880 in all, 512,764 allocated). The sample costs at most
+    /// [`LIGHTS_SAMPLE`] receivers' share of the unoccluded pass; over [`Self::over_budget`]
+    /// (where the pass is skipped) it is not taken, and every group is counted.
     pub fn lights_per_receiver(&self, receivers: &[Element]) -> u64 {
         let groups = self.groups.len() as u64;
         if receivers.is_empty() || groups == 0 {
             return 0;
+        }
+        if self.over_budget(receivers.len()) {
+            return groups;
         }
         let stride = receivers.len().div_ceil(LIGHTS_SAMPLE);
         let sample: Vec<&Element> = receivers.iter().step_by(stride).collect();
