@@ -752,6 +752,18 @@ impl Prepared {
             + ((n + backs) * channels * size_of::<f32>()) as u64
     }
 
+    /// [`Self::history_bytes_with`] when a solve would allocate that history, 0 when Anderson
+    /// mixing is off by its own settings ([`SolverOptions::acceleration_depth`] 0, or a history
+    /// over [`ACCELERATION_BUDGET_BYTES`]; see [`Self::acceleration`]).
+    pub(super) fn planned_history_bytes(&self, slots: usize, channels: usize) -> u64 {
+        let bytes = self.history_bytes_with(slots, channels);
+        if self.options.acceleration_depth > 0 && bytes <= ACCELERATION_BUDGET_BYTES {
+            bytes
+        } else {
+            0
+        }
+    }
+
     /// One Jacobi sweep from the state `from` into `to`: sender summaries, pull, gather.
     /// Returns the sweep's sums.
     #[allow(clippy::type_complexity)]

@@ -158,24 +158,11 @@ impl Prepared {
     /// large arrays do not reuse it: without this check the classroom peaked at 592 to 637 MiB
     /// there, with it at 547 MiB (one step coarser).
     pub(super) fn solve_fits_beside_held(&self, channels: usize) -> bool {
-        let Some(held) = crate::memory::current_rss_bytes() else {
-            return true;
-        };
-        if budget::coarser(&self.options).is_none() {
-            return true;
-        }
-        let history = self.history_bytes(channels);
-        let history = if self.options.acceleration_depth > 0 && history <= ACCELERATION_BUDGET_BYTES
-        {
-            history
-        } else {
-            0
-        };
-        let now = Budget {
-            limit: self.budget.limit,
-            base: held,
-        };
-        now.fits(self.state_bytes + history)
+        // Where the resident memory is unknown the budget's base is 0, and the fit (with the
+        // whole model beside the history) already passed against the limit.
+        budget::coarser(&self.options).is_none()
+            || Budget::start(self.budget.limit)
+                .fits(self.state_bytes + self.planned_history_bytes(self.live.slots(), channels))
     }
 
     /// One attempt of [`Prepared::new`] with the model of `options`: tree (from `base`,
@@ -346,14 +333,14 @@ impl Prepared {
         // more than it needs a finer model. The coarsest model fits without it. The exact
         // direct light's result (24 bytes a face) lives beside it.
         let channels = costs.channels() as usize;
-        let reserve = budget::coarser(options).is_some() && options.acceleration_depth > 0;
-        let history = |prepared: &Prepared, slots: u64| {
-            let bytes = prepared.history_bytes_with(slots as usize, channels);
-            if reserve && bytes <= ACCELERATION_BUDGET_BYTES {
+        let reserve = budget::coarser(options).is_some();
+        let history = |prepared: &Prepared, slots: u64| match prepared
+            .planned_history_bytes(slots as usize, channels)
+        {
+            bytes if reserve && bytes > 0 => {
                 bytes + 24 * (prepared.element_count() + prepared.elem_two.len()) as u64
-            } else {
-                0
             }
+            _ => 0,
         };
         let build_live = |prepared: &Prepared| {
             if prepared.use_anti {
@@ -370,10 +357,10 @@ impl Prepared {
         // The fields and their per-sweep sums, every slot's until the live bins are known (an
         // upper bound).
         let fields_bytes = self.fields.bytes() + self.fields.sweep_bytes(channels);
-        let reserved = history(self, counts.slots.unwrap_or(0)) + fields_bytes;
+        let history_all_bins = history(self, counts.slots.unwrap_or(0));
         match PairCache::build(
             &*self,
-            own.min(budget.spare(costs.bytes(&counts) + reserved)),
+            own.min(budget.spare(costs.bytes(&counts) + history_all_bins + fields_bytes)),
         ) {
             Ok(cache) => {
                 self.pairs = Some(cache);
@@ -383,8 +370,8 @@ impl Prepared {
                 self.live = build_live(&*self);
                 counts.slots = Some(self.live.slots() as u64);
                 if cache_bytes <= own {
-                    let reserved = history(self, self.live.slots() as u64) + fields_bytes;
-                    let spare = budget.spare(costs.bytes(&counts) + reserved);
+                    let history_live = history(self, self.live.slots() as u64);
+                    let spare = budget.spare(costs.bytes(&counts) + history_live + fields_bytes);
                     self.pairs = PairCache::build(&*self, own.min(spare)).ok();
                     cache_dropped = self.pairs.is_none();
                 }
@@ -398,19 +385,19 @@ impl Prepared {
         let pair_bytes = self.pairs.as_ref().map_or(0, PairCache::bytes);
         let held =
             |fields: &Fields| costs.bytes(&counts) + pair_bytes + fields.bytes() + sweep_sums;
-        let reserved = history(self, self.live.slots() as u64);
+        let history_live = history(self, self.live.slots() as u64);
         // The field links' terms, as many fields' as fit what the pair cache left of its
         // budget.
         let terms_budget = own
             .saturating_sub(pair_bytes)
-            .min(budget.spare(held(&self.fields) + reserved));
+            .min(budget.spare(held(&self.fields) + history_live));
         if self.fields.links > 0 && terms_budget > 0 {
             let mut fields = std::mem::take(&mut self.fields);
             fields.cache_terms(&self.sweep_context(), &self.links, terms_budget);
             self.fields = fields;
         }
         let estimate = held(&self.fields);
-        if !budget.fits(estimate + reserved) {
+        if !budget.fits(estimate + history_live) {
             return Err(OverBudget { estimate });
         }
         self.memory.estimate_bytes = estimate;
