@@ -156,7 +156,8 @@ impl Prepared {
     /// not fit leave memory the allocator keeps (the generated classroom at `--memory-limit
     /// 600M`: 250 MiB resident between attempts against 20 MiB before them), and the solve's
     /// large arrays do not reuse it: without this check the classroom peaked at 592 to 637 MiB
-    /// there, with it at 547 MiB (one step coarser).
+    /// there, with it at 508 to 550 MiB (one or two steps coarser: what the allocator keeps
+    /// varies from run to run, and so does the model kept).
     pub(super) fn solve_fits_beside_held(&self, channels: usize) -> bool {
         // Where the resident memory is unknown the budget's base is 0, and the fit (with the
         // whole model beside the history) already passed against the limit.
