@@ -267,25 +267,11 @@ pub fn poly_form_factor_solid_angle_lanes(
     let mut cross = [[zero; 3]; 4];
     let mut lambert = zero;
     for i in 0..n {
-        let (a, b) = (&r[i], &r[(i + 1) % n]);
-        let c = [
-            a[1] * b[2] - a[2] * b[1],
-            a[2] * b[0] - a[0] * b[2],
-            a[0] * b[1] - a[1] * b[0],
-        ];
-        let cross_len = dot_lanes(&c, &c).sqrt();
-        let angle = atan2_upper_lanes(cross_len, dot_lanes(a, b));
-        let projected = c[0] * n_x.x + c[1] * n_x.y + c[2] * n_x.z;
-        // Not "> 0": a NaN edge makes the whole sum NaN and the form factor 0, as in
-        // `lambert_edge` and `lambert_form_factor`.
-        let positive = cross_len.simd_ne(zero);
-        let term = angle * projected / positive.select(cross_len, Lanes::ONE);
-        lambert += positive.select(term, zero);
+        let (term, c) = lambert_edge_lanes(&r[i], &r[(i + 1) % n], n_x);
+        lambert += term;
         cross[i] = c;
     }
-    // lambert_form_factor, per lane.
-    let f = (lambert * (0.5 / std::f64::consts::PI)).abs();
-    let f = f.is_finite().select(f.min(Lanes::ONE), zero);
+    let f = lambert_form_factor_lanes(lambert);
     // Fan triangles (0, i, i + 1), b x c being edge i's cross.
     let mut omega = zero;
     for i in 1..n - 1 {
@@ -296,6 +282,114 @@ pub fn poly_form_factor_solid_angle_lanes(
         );
     }
     (f, omega)
+}
+
+/// [`lambert_edge`] of `LANES` edges at once (their corner vectors `a` and `b` relative to
+/// each lane's viewing point), with normal `n_x`: the terms and the edges' cross products
+/// `a x b`. 0 where the cross product is 0, as in [`lambert_edge`].
+#[inline(always)]
+fn lambert_edge_lanes(a: &[Lanes; 3], b: &[Lanes; 3], n_x: DVec3) -> (Lanes, [Lanes; 3]) {
+    let zero = Lanes::ZERO;
+    let c = [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ];
+    let cross_len = dot_lanes(&c, &c).sqrt();
+    let angle = atan2_upper_lanes(cross_len, dot_lanes(a, b));
+    let projected = c[0] * n_x.x + c[1] * n_x.y + c[2] * n_x.z;
+    // Not "> 0": a NaN edge makes the whole sum NaN and the form factor 0, as in
+    // `lambert_edge` and `lambert_form_factor`.
+    let positive = cross_len.simd_ne(zero);
+    let term = angle * projected / positive.select(cross_len, Lanes::ONE);
+    (positive.select(term, zero), c)
+}
+
+/// [`lambert_form_factor`] per lane.
+#[inline(always)]
+fn lambert_form_factor_lanes(sum: Lanes) -> Lanes {
+    let f = (sum * (0.5 / std::f64::consts::PI)).abs();
+    f.is_finite().select(f.min(Lanes::ONE), Lanes::ZERO)
+}
+
+/// [`point_form_factor`] of `tri` seen from `LANES` points at once (their x, y and z
+/// coordinates in `points`), all with normal `n_x`. Same precondition; equal to the one-point
+/// function to rounding.
+pub fn point_form_factor_lanes(points: &[Lanes; 3], n_x: DVec3, tri: &Tri) -> Lanes {
+    let r = tri.map(|v| {
+        [
+            Lanes::splat(v.x) - points[0],
+            Lanes::splat(v.y) - points[1],
+            Lanes::splat(v.z) - points[2],
+        ]
+    });
+    let mut lambert = Lanes::ZERO;
+    for i in 0..3 {
+        lambert += lambert_edge_lanes(&r[i], &r[(i + 1) % 3], n_x).0;
+    }
+    lambert_form_factor_lanes(lambert)
+}
+
+/// The sum of [`lambert_edge`] over the directed `edges` seen from `x` with normal `n_x`
+/// (`LANES` edges at a time): a closed contour's sum, for [`lambert_form_factor`]. Equal to the
+/// edge-by-edge sum to rounding.
+pub fn lambert_edges_sum(x: DVec3, n_x: DVec3, edges: &[(DVec3, DVec3)]) -> f64 {
+    let mut sum = Lanes::ZERO;
+    for chunk in edges.chunks(LANES) {
+        // Lanes past the chunk repeat its last edge and are masked out.
+        let a = lanes_of_relative(chunk.iter().map(|e| e.0), x);
+        let b = lanes_of_relative(chunk.iter().map(|e| e.1), x);
+        let term = lambert_edge_lanes(&a, &b, n_x).0;
+        sum += lane_below(chunk.len()).select(term, Lanes::ZERO);
+    }
+    sum.reduce_add()
+}
+
+/// Up to `LANES` points minus `x`, as x, y and z lanes, the last repeated to fill them.
+#[inline(always)]
+fn lanes_of_relative(points: impl Iterator<Item = DVec3>, x: DVec3) -> [Lanes; 3] {
+    let mut v = [[0.0; LANES]; 3];
+    let mut last = 0;
+    for (l, p) in points.enumerate() {
+        let d = p - x;
+        v[0][l] = d.x;
+        v[1][l] = d.y;
+        v[2][l] = d.z;
+        last = l;
+    }
+    for l in last + 1..LANES {
+        for c in &mut v {
+            c[l] = c[last];
+        }
+    }
+    v.map(Lanes::new)
+}
+
+/// The mask of the lanes below `n` (all of them from `LANES` on).
+#[inline(always)]
+pub fn lane_below(n: usize) -> Lanes {
+    Lanes::new([0.0, 1.0, 2.0, 3.0]).simd_lt(Lanes::splat(n as f64))
+}
+
+/// The centroids of the `q x q` pieces of `tri` ([`subdivide`]'s order), as lanes of `LANES`
+/// points (the last lanes repeat the last centroid; [`lane_below`] masks them), and their
+/// count `q * q`: a receiver's quadrature points for the lane kernels.
+pub fn piece_centroid_lanes(tri: &Tri, q: usize) -> (smallvec::SmallVec<[[Lanes; 3]; 9]>, usize) {
+    let mut out = smallvec::SmallVec::new();
+    let mut chunk: smallvec::SmallVec<[DVec3; LANES]> = smallvec::SmallVec::new();
+    let mut count = 0;
+    for piece in subdivide(tri, q) {
+        chunk.push(centroid(&piece));
+        count += 1;
+        if chunk.len() == LANES {
+            out.push(lanes_of(&chunk));
+            chunk.clear();
+        }
+    }
+    if !chunk.is_empty() {
+        out.push(lanes_of(&chunk));
+    }
+    (out, count)
 }
 
 /// Up to `LANES` points as x, y and z lanes, the last point repeated to fill them.
@@ -798,11 +892,19 @@ mod tests {
             let (f, w) = (f.to_array(), w.to_array());
             let first = [poly.v[0], poly.v[1], poly.v[2]];
             let w_first = solid_angle_lanes(&lanes, &first).to_array();
+            let f_first = point_form_factor_lanes(&lanes, n_x, &first).to_array();
             for (l, &x) in points.iter().enumerate() {
                 let (f1, w1) = poly_form_factor_solid_angle(x, n_x, &poly);
                 worst = worst
                     .max((f[l] - f1).abs())
-                    .max((w[l] - w1).abs() / w1.max(1e-3));
+                    .max((w[l] - w1).abs() / w1.max(1e-3))
+                    .max((f_first[l] - point_form_factor(x, n_x, &first)).abs());
+                // The polygon's edges as a contour, edge lanes from one point.
+                let edges: Vec<(DVec3, DVec3)> = (0..poly.len)
+                    .map(|i| (poly.v[i], poly.v[(i + 1) % poly.len]))
+                    .collect();
+                let contour = lambert_form_factor(lambert_edges_sum(x, n_x, &edges));
+                worst = worst.max((contour - point_form_factor_poly(x, n_x, &poly)).abs());
                 let w2 = solid_angle(x, &first);
                 worst = worst.max((w_first[l] - w2).abs() / w2.max(1e-3));
                 // The fan's triangles seen from this one point.
@@ -830,6 +932,30 @@ mod tests {
         let (f, _) = poly_form_factor_solid_angle_lanes(&lanes_of(&[DVec3::ZERO]), n, &poly);
         let (f1, _) = poly_form_factor_solid_angle(DVec3::ZERO, n, &poly);
         assert_eq!((f.to_array()[0], f1), (0.0, 0.0));
+    }
+
+    #[test]
+    fn piece_centroid_lanes_hold_the_pieces_centroids_in_order() {
+        let tri = [
+            DVec3::new(0.1, -0.2, 0.3),
+            DVec3::new(1.7, 0.1, -0.4),
+            DVec3::new(0.4, 2.2, 0.9),
+        ];
+        for q in 1..=7 {
+            let (lanes, count) = piece_centroid_lanes(&tri, q);
+            assert_eq!(count, q * q);
+            assert_eq!(lanes.len(), count.div_ceil(LANES));
+            for (k, piece) in subdivide(&tri, q).enumerate() {
+                let (chunk, l) = (&lanes[k / LANES], k % LANES);
+                let c = centroid(&piece);
+                let got = [0, 1, 2].map(|i| chunk[i].to_array()[l]);
+                assert_eq!(got, c.to_array(), "q {q}, piece {k}");
+            }
+            // The mask keeps exactly the pieces.
+            let last = lane_below(count - (lanes.len() - 1) * LANES).to_array();
+            let kept = last.iter().filter(|&&m| m != 0.0).count();
+            assert_eq!(kept, count - (lanes.len() - 1) * LANES);
+        }
     }
 
     #[test]

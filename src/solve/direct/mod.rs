@@ -58,7 +58,7 @@ use crate::geometry::raytrace::RayScene;
 use crate::geometry::sampling::{point_on_triangle, Rng};
 use crate::geometry::tolerances::GROUP_NORMAL_TOLERANCE;
 use crate::geometry::tolerances::{SAMPLE_BELOW_ONE, TIGHTER};
-use crate::geometry::{self, plane_tol, point_key, PLANE_EPS};
+use crate::geometry::{self, plane_tol, point_key, Lanes, Tri, LANES, PLANE_EPS};
 use crate::mesh::Patches;
 use crate::progress::Progress;
 use crate::solve::hierarchical::Element;
@@ -152,12 +152,29 @@ const SEED: u64 = 0x5eed_d12e_c71d_0001;
 /// form factor of any surface they bound that lies in front of `x` and faces it, in [0, 1].
 /// The same sum as [`geometry::point_form_factor`] over each of the surface's triangles.
 fn contour_form_factor(x: DVec3, n_x: DVec3, edges: &[(DVec3, DVec3)]) -> f64 {
-    geometry::lambert_form_factor(
-        edges
-            .iter()
-            .map(|&(a, b)| geometry::lambert_edge(a - x, b - x, n_x))
-            .sum(),
-    )
+    geometry::lambert_form_factor(geometry::lambert_edges_sum(x, n_x, edges))
+}
+
+/// The sum over the centroids `y` of the `q x q` pieces of the receiver triangle `corners`
+/// (normal `n_x`) that lie in front of emitter `s`'s plane of the point form factors of
+/// `parts` (the part of `s` in front of the receiver's plane) seen from `y`: the receiver
+/// quadrature of [`DirectLight::emitter_form_factor`] and of a group's near members, `LANES`
+/// points at a time.
+fn points_form_factor(corners: &Tri, q: usize, n_x: DVec3, s: &PatchGeom, parts: &[Tri]) -> f64 {
+    let (points, count) = geometry::piece_centroid_lanes(corners, q);
+    let corner = [s.corners[0].x, s.corners[0].y, s.corners[0].z].map(Lanes::splat);
+    let mut sum = Lanes::ZERO;
+    for (c, p) in points.iter().enumerate() {
+        let height = (p[0] - corner[0]) * s.normal.x
+            + (p[1] - corner[1]) * s.normal.y
+            + (p[2] - corner[2]) * s.normal.z;
+        let counted = height.simd_gt(Lanes::ZERO) & geometry::lane_below(count - c * LANES);
+        for part in parts {
+            let f = geometry::point_form_factor_lanes(p, n_x, part);
+            sum += counted.select(f, Lanes::ZERO);
+        }
+    }
+    sum.reduce_add()
 }
 
 /// The cumulative distribution of `weights` (not all 0, finite), the last entry exactly 1.
@@ -536,20 +553,17 @@ impl<'a> DirectLight<'a> {
             Some(parts) => {
                 // The parts' rims: shared edges cancel, as in the whole group's boundary.
                 let mut sum = 0.0;
-                let mut add = |a: DVec3, b: DVec3| {
-                    sum += geometry::lambert_edge(a - x, b - x, r.normal);
-                };
                 for &part in parts {
                     match part {
                         Part::Node(n) => {
-                            for &(a, b) in tree.rim(&tree.nodes[n as usize]) {
-                                add(a, b);
-                            }
+                            let rim = tree.rim(&tree.nodes[n as usize]);
+                            sum += geometry::lambert_edges_sum(x, r.normal, rim);
                         }
                         Part::Member(i) => {
                             let c = self.emitters.geom[group.members[i as usize] as usize].corners;
                             for j in 0..3 {
-                                add(c[j], c[(j + 1) % 3]);
+                                sum +=
+                                    geometry::lambert_edge(c[j] - x, c[(j + 1) % 3] - x, r.normal);
                             }
                         }
                     }
@@ -568,13 +582,8 @@ impl<'a> DirectLight<'a> {
             if q == 1 {
                 return;
             }
-            let mut near = 0.0;
-            for piece in geometry::subdivide(&r.corners, q) {
-                let y = geometry::centroid(&piece);
-                if s.normal.dot(y - s.corners[0]) > 0.0 {
-                    near += geometry::point_form_factor(y, r.normal, &s.corners);
-                }
-            }
+            let near =
+                points_form_factor(&r.corners, q, r.normal, s, std::slice::from_ref(&s.corners));
             f += near / (q * q) as f64 - geometry::point_form_factor(x, r.normal, &s.corners);
         };
         // The same bound node by node: only nodes near the receiver are visited.
@@ -757,22 +766,18 @@ impl<'a> DirectLight<'a> {
             return 0.0;
         }
         let q = receiver_points(separation(receiver, s));
-        let mut f = 0.0;
-        let mut add_point = |x: DVec3| {
-            if s.normal.dot(x - s.corners[0]) > 0.0 {
-                for part in front.triangles() {
-                    f += geometry::point_form_factor(x, r.normal, &part);
-                }
-            }
-        };
+        let parts: smallvec::SmallVec<[Tri; 2]> = front.triangles().collect();
         if q == 1 {
-            add_point(receiver.centroid);
-        } else {
-            for piece in geometry::subdivide(&r.corners, q) {
-                add_point(geometry::centroid(&piece));
+            let x = receiver.centroid;
+            if s.normal.dot(x - s.corners[0]) > 0.0 {
+                return parts
+                    .iter()
+                    .map(|part| geometry::point_form_factor(x, r.normal, part))
+                    .sum();
             }
+            return 0.0;
         }
-        f / (q * q) as f64
+        points_form_factor(&r.corners, q, r.normal, s, &parts) / (q * q) as f64
     }
 
     /// The receiver's visible direct light `sum_g E_g F_g V_g` (H / pi per RGB channel): each
