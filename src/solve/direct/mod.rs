@@ -141,6 +141,12 @@ struct Pass {
 /// Most receivers [`DirectLight::lights_per_receiver`] samples.
 pub const LIGHTS_SAMPLE: usize = 1024;
 
+/// Bytes of every emitter group at every receiver (16 a group) up to which
+/// [`DirectLight::lights_per_receiver`] counts every group instead of sampling: the estimate is
+/// then at most this much above what the receivers keep, and the sample's share of the
+/// unoccluded pass (a tenth of it on the seed room) is saved.
+pub const LIGHTS_UNSAMPLED_BYTES: u64 = 16 << 20;
+
 /// Factor on the sampled mean of groups per receiver in the direct light's memory estimate: 2
 /// for the vectors' growth by doubling, 1.5 for the sample's error.
 pub const LIGHTS_MARGIN: f64 = 3.0;
@@ -386,13 +392,15 @@ impl<'a> DirectLight<'a> {
     /// the sample's error), at most every group. The bear lit by its own head: 20.8 groups per
     /// receiver of 779 (357,880 in all, 512,764 allocated). The sample costs at most
     /// [`LIGHTS_SAMPLE`] receivers' share of the unoccluded pass; over [`Self::over_budget`]
-    /// (where the pass is skipped) it is not taken, and every group is counted.
+    /// (where the pass is skipped) it is not taken, nor where every group at every receiver
+    /// would take at most [`LIGHTS_UNSAMPLED_BYTES`], and every group is counted.
     pub fn lights_per_receiver(&self, receivers: &[Element]) -> u64 {
         let groups = self.groups.len() as u64;
         if receivers.is_empty() || groups == 0 {
             return 0;
         }
-        if self.over_budget(receivers.len()) {
+        let every_group_bytes = (receivers.len() as u64).saturating_mul(groups) * 16;
+        if self.over_budget(receivers.len()) || every_group_bytes <= LIGHTS_UNSAMPLED_BYTES {
             return groups;
         }
         let stride = receivers.len().div_ceil(LIGHTS_SAMPLE);
