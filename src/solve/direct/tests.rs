@@ -214,6 +214,37 @@ mod budget_tests {
         );
     }
 
+    /// Where every group at every receiver fits [`LIGHTS_UNSAMPLED_BYTES`], every group is
+    /// counted, not a sample's estimate: in the 1k-triangle Cornell box with every third patch
+    /// emitting and turned over, receivers keep few groups, and the sampled estimate would be
+    /// well under every group. (The 4k-triangle box is sampled: the test above.)
+    #[test]
+    fn few_receivers_count_every_group_unsampled() {
+        let mut scene = generated::subdivided_cornell_box(1_000);
+        for t in (0..scene.len()).step_by(3) {
+            scene.emission[t] = [1.0; 3];
+            scene.triangles[t].swap(1, 2);
+        }
+        let patches = build_patches(&scene, None);
+        let receivers = super::super::solvers::patch_receivers(&patches);
+        let direct = DirectLight::new(&patches, receivers.len());
+        let groups = direct.group_count() as u64;
+        assert!(groups > 1 && receivers.len() as u64 * groups * 16 <= LIGHTS_UNSAMPLED_BYTES);
+        let (mut lights, mut parts) = (Vec::new(), Vec::new());
+        let kept: usize = (receivers.iter())
+            .map(|r| {
+                direct.unoccluded(r, &mut lights, &mut parts);
+                lights.len()
+            })
+            .sum();
+        let sampled = kept as f64 / receivers.len() as f64 * LIGHTS_MARGIN;
+        assert!(
+            sampled < 0.75 * groups as f64,
+            "sampled {sampled}, groups {groups}"
+        );
+        assert_eq!(direct.lights_per_receiver(&receivers), groups);
+    }
+
     #[test]
     fn direct_light_budget_counts_receivers_times_groups() {
         let patches = build_patches(&generated::cornell_box(), None);
