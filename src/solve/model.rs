@@ -19,6 +19,7 @@ use rayon::prelude::*;
 
 use crate::geometry::raytrace::{Hit, RayScene};
 use crate::geometry::sampling::{cosine_direction, point_on_triangle, Rng};
+use crate::geometry::{Lanes, LANES};
 use crate::hierarchy::ClusterTree;
 use crate::mesh::Patches;
 pub use crate::solve::solution::ModelStats;
@@ -544,6 +545,69 @@ fn all_in_front(tree: &ClusterTree, n: DVec3, d: f64) -> bool {
     true
 }
 
+/// The emitting patches of [`light_factors`], [`LANES`] to a chunk, field by field (the
+/// last chunk padded with emitters of area 0, which add nothing).
+struct EmitterLanes {
+    /// Per chunk: centroid, normal (x, y, z lanes each), area, emission (RGB lanes) and the
+    /// two-sided mask.
+    chunks: Vec<EmitterChunk>,
+}
+
+struct EmitterChunk {
+    centroid: [Lanes; 3],
+    normal: [Lanes; 3],
+    area: Lanes,
+    emission: [Lanes; 3],
+    two_sided: Lanes,
+}
+
+impl EmitterLanes {
+    fn of(patches: &Patches, emitters: &[usize]) -> EmitterLanes {
+        let chunks = emitters
+            .chunks(LANES)
+            .map(|chunk| {
+                let lane = |f: &dyn Fn(usize) -> f64| {
+                    Lanes::new(std::array::from_fn(|l| chunk.get(l).map_or(0.0, |&e| f(e))))
+                };
+                let axes =
+                    |f: &dyn Fn(usize) -> DVec3| [0, 1, 2].map(|k| lane(&|e| f(e).to_array()[k]));
+                EmitterChunk {
+                    centroid: axes(&|e| patches.centroid[e]),
+                    normal: axes(&|e| patches.normal[e]),
+                    area: lane(&|e| patches.area[e]),
+                    emission: [0, 1, 2].map(|c| lane(&|e| patches.emission[e][c])),
+                    two_sided: lane(&|e| f64::from(u8::from(patches.is_two_sided(e)))),
+                }
+            })
+            .collect();
+        EmitterLanes { chunks }
+    }
+
+    /// `sum_e E_e F_e` at `x` (normal `n_x`), RGB: each emitter's point form factor
+    /// `A_e cos cos / (pi d^2 + A_e)` from its centroid, unoccluded (0 when either side
+    /// faces away; a two-sided emitter faces both ways).
+    fn light_at(&self, x: DVec3, n_x: DVec3) -> [f64; 3] {
+        let zero = Lanes::ZERO;
+        let mut sum = [zero; 3];
+        for chunk in &self.chunks {
+            let v = [0, 1, 2].map(|k| chunk.centroid[k] - Lanes::splat(x.to_array()[k]));
+            let d2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+            let d = d2.sqrt();
+            let cos_x = (v[0] * n_x.x + v[1] * n_x.y + v[2] * n_x.z) / d;
+            let cos_e =
+                -(v[0] * chunk.normal[0] + v[1] * chunk.normal[1] + v[2] * chunk.normal[2]) / d;
+            let cos_e = chunk.two_sided.simd_gt(zero).select(cos_e.abs(), cos_e);
+            let lit = d2.simd_gt(zero) & cos_x.simd_gt(zero) & cos_e.simd_gt(zero);
+            let f = chunk.area * cos_x * cos_e / (d2 * std::f64::consts::PI + chunk.area);
+            let f = lit.select(f, zero);
+            for (s, e) in sum.iter_mut().zip(&chunk.emission) {
+                *s += *e * f;
+            }
+        }
+        sum.map(|s| s.reduce_add())
+    }
+}
+
 /// Most receiver-emitter terms [`light_factors`] may evaluate; above it every factor is 1 (a
 /// scene whose every triangle is a separate light).
 pub const LIGHT_FACTOR_BUDGET: u64 = 50_000_000;
@@ -574,6 +638,7 @@ pub fn light_factors(patches: &Patches) -> Vec<f32> {
     {
         return vec![1.0; n];
     }
+    let lanes = EmitterLanes::of(patches, &emitters);
     let light: Vec<f64> = (0..n)
         .into_par_iter()
         .map(|p| {
@@ -581,29 +646,7 @@ pub fn light_factors(patches: &Patches) -> Vec<f32> {
             if !patches.active[p] || patches.is_emitter(p) || rho.iter().all(|&r| r <= 0.0) {
                 return 0.0;
             }
-            let (x, n_x) = (patches.centroid[p], patches.normal[p]);
-            let mut sum = [0.0f64; 3];
-            for &e in &emitters {
-                let v = patches.centroid[e] - x;
-                let d2 = v.length_squared();
-                if !(d2 > 0.0) {
-                    continue;
-                }
-                let d = d2.sqrt();
-                let cos_x = n_x.dot(v) / d;
-                let mut cos_e = -patches.normal[e].dot(v) / d;
-                if patches.is_two_sided(e) {
-                    cos_e = cos_e.abs();
-                }
-                if !(cos_x > 0.0 && cos_e > 0.0) {
-                    continue;
-                }
-                let a = patches.area[e];
-                let f = a * cos_x * cos_e / (std::f64::consts::PI * d2 + a);
-                for (s, e) in sum.iter_mut().zip(patches.emission[e]) {
-                    *s += e * f;
-                }
-            }
+            let sum = lanes.light_at(patches.centroid[p], patches.normal[p]);
             (0..3).map(|c| rho[c] * sum[c]).fold(0.0, f64::max)
         })
         .collect();
@@ -706,5 +749,58 @@ mod tests {
         assert_eq!(light_factors(&plate_under_a_light(10.0)), f);
         // No light: every factor is 1.
         assert_eq!(light_factors(&plate_under_a_light(0.0)), vec![1.0; 6]);
+    }
+
+    /// The emitters' light at a point, four emitters at a time, is the sum of each one's term
+    /// (to rounding): a subdivided Cornell box with seven more emitters, two of them
+    /// two-sided, seen from every patch's centroid.
+    #[test]
+    fn emitter_lanes_sum_each_emitters_term() {
+        let mut scene = crate::scene::generated::subdivided_cornell_box(400);
+        for t in [3, 40, 77, 150, 151, 260, 333] {
+            scene.emission[t] = [1.0, 0.5 + t as f64 / 1000.0, 2.0];
+        }
+        scene.two_sided = vec![false; scene.len()];
+        scene.two_sided[40] = true;
+        scene.two_sided[260] = true;
+        let patches = crate::mesh::build_patches(&scene, None);
+        let emitters: Vec<usize> = (0..patches.len())
+            .filter(|&p| patches.is_emitter(p))
+            .collect();
+        // Its own light and these seven, the last chunk padded.
+        assert!(emitters.len() > 7 && emitters.len() % LANES != 0);
+        let lanes = EmitterLanes::of(&patches, &emitters);
+        let mut lit = 0;
+        for p in 0..patches.len() {
+            let (x, n_x) = (patches.centroid[p], patches.normal[p]);
+            let mut sum = [0.0f64; 3];
+            for &e in &emitters {
+                let v = patches.centroid[e] - x;
+                let d2 = v.length_squared();
+                let (cos_x, mut cos_e) = (
+                    n_x.dot(v) / d2.sqrt(),
+                    -patches.normal[e].dot(v) / d2.sqrt(),
+                );
+                if patches.is_two_sided(e) {
+                    cos_e = cos_e.abs();
+                }
+                if d2 > 0.0 && cos_x > 0.0 && cos_e > 0.0 {
+                    let a = patches.area[e];
+                    let f = a * cos_x * cos_e / (std::f64::consts::PI * d2 + a);
+                    for c in 0..3 {
+                        sum[c] += patches.emission[e][c] * f;
+                    }
+                }
+            }
+            let got = lanes.light_at(x, n_x);
+            for c in 0..3 {
+                assert!(
+                    (got[c] - sum[c]).abs() <= 1e-12 * sum[c].max(1e-300),
+                    "{p}: {got:?} {sum:?}"
+                );
+            }
+            lit += usize::from(sum[0] > 0.0);
+        }
+        assert!(lit > patches.len() / 2, "{lit}");
     }
 }
