@@ -768,7 +768,7 @@ mod tests {
             .filter(|&p| patches.is_emitter(p))
             .collect();
         // Its own light and these seven, the last chunk padded.
-        assert!(emitters.len() > 7 && emitters.len() % LANES != 0);
+        assert!(emitters.len() > 7 && !emitters.len().is_multiple_of(LANES));
         let lanes = EmitterLanes::of(&patches, &emitters);
         let mut lit = 0;
         for p in 0..patches.len() {
@@ -787,8 +787,8 @@ mod tests {
                 if d2 > 0.0 && cos_x > 0.0 && cos_e > 0.0 {
                     let a = patches.area[e];
                     let f = a * cos_x * cos_e / (std::f64::consts::PI * d2 + a);
-                    for c in 0..3 {
-                        sum[c] += patches.emission[e][c] * f;
+                    for (s, e) in sum.iter_mut().zip(patches.emission[e]) {
+                        *s += e * f;
                     }
                 }
             }
