@@ -172,6 +172,11 @@ impl HierarchicalCosts {
 pub struct OverBudget {
     /// The estimate when it stopped (bytes, without slack).
     pub estimate: u64,
+    /// Bytes per element that the solve would have added beside the model (its fields'
+    /// per-sweep sums, the Anderson history, the exact direct light's result) when the model
+    /// was refused only once built, with them beside it; 0 when the refinement itself stopped.
+    /// The next attempt's refinement counts them ([`LinkBudget::reserve_per_element`]).
+    pub solve_bytes_per_element: u64,
 }
 
 /// The budget of one link refinement: the costs of the model being refined and the bytes it may
@@ -184,6 +189,12 @@ pub struct LinkBudget {
     pub budget: Budget,
     /// Patches of the scene.
     pub patches: u64,
+    /// Bytes per element counted beside the model while it is refined: what the solve adds once
+    /// it is built (fields' sums, Anderson history, direct light's result), as measured on an
+    /// earlier attempt that was refused for them ([`OverBudget::solve_bytes_per_element`]), so
+    /// that a refinement which cannot fit beside them stops while it refines instead of being
+    /// refused once built. 0 when no attempt measured them.
+    pub reserve_per_element: u64,
 }
 
 impl LinkBudget {
@@ -196,20 +207,26 @@ impl LinkBudget {
                 base: 0,
             },
             patches: 0,
+            reserve_per_element: 0,
         }
     }
 
-    /// `Ok` with the estimate when a model of `counts` fits, else the [`OverBudget`] outcome.
+    /// `Ok` with the estimate when a model of `counts` fits beside its reserve
+    /// ([`LinkBudget::reserve_per_element`] per element), else the [`OverBudget`] outcome.
     pub fn check(&self, counts: &ModelCounts) -> Result<u64, OverBudget> {
         let counts = ModelCounts {
             patches: self.patches,
             ..*counts
         };
-        let estimate = self.costs.bytes(&counts);
+        let estimate =
+            self.costs.bytes(&counts) + self.reserve_per_element.saturating_mul(counts.elements);
         if self.budget.fits(estimate) {
             Ok(estimate)
         } else {
-            Err(OverBudget { estimate })
+            Err(OverBudget {
+                estimate,
+                solve_bytes_per_element: 0,
+            })
         }
     }
 }
@@ -288,6 +305,7 @@ impl<'a> Meter<'a> {
     pub fn over_budget(&self) -> OverBudget {
         OverBudget {
             estimate: self.estimate.load(Ordering::Relaxed),
+            solve_bytes_per_element: 0,
         }
     }
 }

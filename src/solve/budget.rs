@@ -337,6 +337,7 @@ mod tests {
                 base: 0,
             },
             patches: 10,
+            reserve_per_element: 0,
         };
         let meter = Meter::new(&budget, ModelCounts::default());
         assert!(meter.add(1000, 10, 0, 0));

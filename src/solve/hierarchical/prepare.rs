@@ -7,6 +7,13 @@ use super::*;
 /// light in front of it ([`ClusterTree::split_toward_points`]).
 pub const LIGHT_SPLIT_RATIO: f64 = 0.5;
 
+/// Share of the bytes per element an attempt refused for what the solve adds beside its model
+/// ([`OverBudget::solve_bytes_per_element`]) that the next attempts count while they refine
+/// ([`LinkBudget::reserve_per_element`]). Below 1 because a coarser model adds a little less
+/// per element (b90_office at `--memory-limit 2G`: 11.6, 11.5 and 11.3 KB per element at
+/// epsilon 2, 4 and 8), so the reserve does not refuse a model that would fit.
+pub const RESERVE_SHARE: f64 = 0.9;
+
 /// The cluster tree of a scene before any on-demand split, with the sides of each patch that
 /// block light: built once and kept by the attempts of [`Prepared::new`] (each undoes the
 /// splits of the one before, [`ClusterTree::unsplit`]), since coarsening changes neither.
@@ -92,11 +99,14 @@ impl Prepared {
         let mut coarsened = Vec::new();
         let mut attempts = 0;
         let mut discarded_seconds = 0.0;
+        // What the solve adds per element beside the model, once an attempt was refused for it.
+        let mut reserve_per_element = 0;
         loop {
             let link_budget = LinkBudget {
                 costs: HierarchicalCosts::new(model.bins, channels),
                 budget,
                 patches: patches.len() as u64,
+                reserve_per_element,
             };
             attempts += 1;
             let t_attempt = Instant::now();
@@ -106,6 +116,7 @@ impl Prepared {
                     base.tree = std::mem::take(&mut prepared.tree);
                     OverBudget {
                         estimate: prepared.memory.estimate_bytes,
+                        solve_bytes_per_element: 0,
                     }
                 }
                 Ok(mut prepared) => {
@@ -127,6 +138,9 @@ impl Prepared {
                 Err(over) => over,
             };
             discarded_seconds += t_attempt.elapsed().as_secs_f64();
+            if over.solve_bytes_per_element > 0 {
+                reserve_per_element = (over.solve_bytes_per_element as f64 * RESERVE_SHARE) as u64;
+            }
             match budget::coarser(&model) {
                 Some((next, step)) => {
                     coarsened.push(step);
@@ -399,7 +413,13 @@ impl Prepared {
         }
         let estimate = held(&self.fields);
         if !budget.fits(estimate + history_live) {
-            return Err(OverBudget { estimate });
+            // What the fit adds to the model's arrays, but for the pair cache (which takes what
+            // is spare).
+            let beside = self.fields.bytes() + sweep_sums + history_live;
+            return Err(OverBudget {
+                estimate,
+                solve_bytes_per_element: beside / self.element_count().max(1) as u64,
+            });
         }
         self.memory.estimate_bytes = estimate;
         self.sweep_bytes = estimate;

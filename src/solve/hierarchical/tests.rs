@@ -448,6 +448,63 @@ fn a_model_that_fits_only_without_its_history_keeps_anderson() {
     assert!(tight.fits(memory), "{memory} over {}", tight.limit);
 }
 
+/// A model refused once built, for what its solve adds beside it (fields' sums, Anderson
+/// history), says how much that is per element, and a refinement that counts it
+/// ([`LinkBudget::reserve_per_element`]) stops while it refines: b90_office at
+/// `--memory-limit 2G` refined and coupled two models in full before refusing them.
+#[test]
+fn a_model_refused_for_its_solve_reserves_it_in_the_next_refinement() {
+    let patches = build_patches(&generated::subdivided_cornell_box(4_000), None);
+    // No pair cache, whose share would shrink to make room.
+    let options = SolverOptions {
+        direct_light: false,
+        pair_cache_mb: 0,
+        ..SolverOptions::default()
+    };
+    let roomy = crate::memory::Budget {
+        limit: 1 << 40,
+        base: 0,
+    };
+    let prepared = match Prepared::within(&patches, &options, false, roomy) {
+        Ok(prepared) => prepared,
+        Err(e) => panic!("the box does not fit: {e}"),
+    };
+    let channels = channels_needed(&patches);
+    let estimate = prepared.memory.estimate_bytes;
+    let tight = crate::memory::Budget {
+        limit: crate::memory::with_slack(estimate),
+        base: 0,
+    };
+    let link_budget = |reserve_per_element| LinkBudget {
+        costs: HierarchicalCosts::new(options.bins, channels),
+        budget: tight,
+        patches: patches.len() as u64,
+        reserve_per_element,
+    };
+    let mut base = BaseTree::new(&patches, &options);
+    let refused = match Prepared::build(&patches, &options, false, &link_budget(0), &mut base) {
+        Ok(_) => panic!("fitted beside its history at {}", tight.limit),
+        Err(over) => over,
+    };
+    // Its history and sums, per element.
+    let n = prepared.element_count() as u64;
+    let beside = prepared.history_bytes(channels) + prepared.fields.sweep_bytes(channels);
+    let per_element = refused.solve_bytes_per_element;
+    assert!(
+        per_element >= beside / n && per_element <= 2 * beside / n,
+        "{per_element} per element against {} beside",
+        beside / n
+    );
+    // Counted while refining, the same model stops there.
+    let reserve = (per_element as f64 * super::prepare::RESERVE_SHARE) as u64;
+    match Prepared::build(&patches, &options, false, &link_budget(reserve), &mut base) {
+        Ok(_) => panic!("fitted with its reserve"),
+        Err(over) => assert_eq!(over.solve_bytes_per_element, 0, "refused once built"),
+    }
+    // The refinement alone, without it, fits.
+    assert!(tight.fits(estimate));
+}
+
 /// The pair cache gets only what the model, its fields' per-sweep sums and the Anderson
 /// history leave: a model that fits without a cache is not refused for one (b90_office at
 /// 2 GB had its cache take the room of the fields' sums, and the model that fitted without the
@@ -490,6 +547,7 @@ fn the_pair_cache_leaves_room_for_the_fields_sums() {
         costs: HierarchicalCosts::new(uncached.options.bins, channels),
         budget: tight,
         patches: patches.len() as u64,
+        reserve_per_element: 0,
     };
     if let Err(over) = uncached.fit_model(&patches, &link_budget) {
         panic!(
