@@ -10,7 +10,7 @@ pub const LIGHT_SPLIT_RATIO: f64 = 0.5;
 /// Share of the bytes per element an attempt refused for what the solve adds beside its model
 /// ([`OverBudget::solve_bytes_per_element`]) that the next attempts count while they refine
 /// ([`LinkBudget::reserve_per_element`]). Below 1 because a coarser model adds a little less
-/// per element (b90_office at `--memory-limit 2G`: 11.6, 11.5 and 11.3 KB per element at
+/// per element (b90_office at `--memory-limit 2G`: about 12.2, 12.1 and 11.8 kB per element at
 /// epsilon 2, 4 and 8), so the reserve does not refuse a model that would fit.
 pub const RESERVE_SHARE: f64 = 0.9;
 
