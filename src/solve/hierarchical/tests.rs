@@ -405,19 +405,11 @@ fn warm_states_keep_their_predecessors_within_the_memory_limit() {
 /// history.
 #[test]
 fn a_model_that_fits_only_without_its_history_keeps_anderson() {
-    let patches = build_patches(&generated::subdivided_cornell_box(4_000), None);
     let options = SolverOptions {
         direct_light: false,
         ..SolverOptions::default()
     };
-    let roomy = crate::memory::Budget {
-        limit: 1 << 40,
-        base: 0,
-    };
-    let prepared = match Prepared::within(&patches, &options, false, roomy) {
-        Ok(prepared) => prepared,
-        Err(e) => panic!("the box does not fit: {e}"),
-    };
+    let (patches, prepared) = box_without_limit(&options);
     let channels = channels_needed(&patches);
     let history = prepared.history_bytes(channels);
     assert!(history > 0);
@@ -448,27 +440,33 @@ fn a_model_that_fits_only_without_its_history_keeps_anderson() {
     assert!(tight.fits(memory), "{memory} over {}", tight.limit);
 }
 
+/// The 4k-triangle subdivided Cornell box and its model under `options` without a memory
+/// limit (1 TiB).
+fn box_without_limit(options: &SolverOptions) -> (crate::mesh::Patches, Prepared) {
+    let patches = build_patches(&generated::subdivided_cornell_box(4_000), None);
+    let roomy = crate::memory::Budget {
+        limit: 1 << 40,
+        base: 0,
+    };
+    match Prepared::within(&patches, options, false, roomy) {
+        Ok(prepared) => (patches, prepared),
+        Err(e) => panic!("the box does not fit: {e}"),
+    }
+}
+
 /// A model refused once built, for what its solve adds beside it (fields' sums, Anderson
 /// history), says how much that is per element, and a refinement that counts it
 /// ([`LinkBudget::reserve_per_element`]) stops while it refines: b90_office at
 /// `--memory-limit 2G` refined and coupled two models in full before refusing them.
 #[test]
 fn a_model_refused_for_its_solve_reserves_it_in_the_next_refinement() {
-    let patches = build_patches(&generated::subdivided_cornell_box(4_000), None);
     // No pair cache, whose share would shrink to make room.
     let options = SolverOptions {
         direct_light: false,
         pair_cache_mb: 0,
         ..SolverOptions::default()
     };
-    let roomy = crate::memory::Budget {
-        limit: 1 << 40,
-        base: 0,
-    };
-    let prepared = match Prepared::within(&patches, &options, false, roomy) {
-        Ok(prepared) => prepared,
-        Err(e) => panic!("the box does not fit: {e}"),
-    };
+    let (patches, prepared) = box_without_limit(&options);
     let channels = channels_needed(&patches);
     let estimate = prepared.memory.estimate_bytes;
     let tight = crate::memory::Budget {
