@@ -19,6 +19,17 @@ Python 3 standard library only. Used by docs/mesh_quality.sh; also usable on its
         group holds what both can resolve, and the difference no longer counts the
         resolution the variant gave up.
 
+    mesh_quality.py elements ORIGINAL.obj ORIGINAL.csv VARIANT_ELEMENTS.csv VARIANT.map.csv
+        prints the same measure as `error`, with each original triangle's radiance taken from
+        the variant's solved elements (`antiradiance solve --elements`) instead of its
+        per-triangle CSV: the area-weighted mean of the elements (of the variant triangles
+        covering the original, on its side) over the original triangle, each clipped to it in
+        their common plane. It measures the
+        solver's own resolution inside a variant triangle that covers many originals
+        (huge-tiny). ORIGINAL.obj is read for its vertices and faces (polygons fanned from their
+        first corner, as the solver fans convex ones); the variant must share its frame (not the
+        translations).
+
     mesh_quality.py table RUNS.tsv
         prints one markdown table of the runs listed in RUNS.tsv (tab-separated, no header:
         scene, variant, status, variant OBJ, report JSON, triangles CSV, map CSV or "-"); the
@@ -170,6 +181,116 @@ def common_difference(original_csv, variant_csv, map_csv):
     return total / channels if channels else 0.0
 
 
+def read_obj_triangles(path):
+    """The triangles of an OBJ file as corner triples, faces fanned from their first corner."""
+    vertices, triangles = [], []
+    with open(path) as f:
+        for line in f:
+            parts = line.split()
+            if not parts:
+                continue
+            if parts[0] == "v":
+                vertices.append(tuple(float(x) for x in parts[1:4]))
+            elif parts[0] == "f":
+                ids = []
+                for token in parts[1:]:
+                    i = int(token.split("/")[0])
+                    ids.append(i - 1 if i > 0 else len(vertices) + i)
+                for k in range(1, len(ids) - 1):
+                    triangles.append((vertices[ids[0]], vertices[ids[k]], vertices[ids[k + 1]]))
+    return triangles
+
+
+def read_elements(path):
+    """Rows of an elements CSV grouped by input triangle: {triangle: [(corners, (r, g, b))]}."""
+    out = {}
+    with open(path, newline="") as f:
+        for row in csv.DictReader(f):
+            corners = tuple(
+                tuple(float(row[f"{axis}{k}"]) for axis in "xyz") for k in range(3)
+            )
+            rgb = (float(row["r"]), float(row["g"]), float(row["b"]))
+            out.setdefault(int(row["triangle"]), []).append((corners, rgb))
+    return out
+
+
+def sub(a, b):
+    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
+
+
+def dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def clipped_area(subject, clip, axes):
+    """The area of triangle `subject` inside triangle `clip` (both in one plane), in the 2-D
+    coordinates `axes` of that plane (Sutherland and Hodgman), scaled back to 3-D by the
+    caller."""
+    def to2(p):
+        return (p[axes[0]], p[axes[1]])
+
+    polygon = [to2(p) for p in subject]
+    c = [to2(p) for p in clip]
+    # Orient the clip triangle counter-clockwise.
+    if (c[1][0] - c[0][0]) * (c[2][1] - c[0][1]) - (c[1][1] - c[0][1]) * (c[2][0] - c[0][0]) < 0:
+        c = [c[0], c[2], c[1]]
+    for k in range(3):
+        a, b = c[k], c[(k + 1) % 3]
+        side = lambda p: (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0])
+        out = []
+        for m in range(len(polygon)):
+            p, q = polygon[m], polygon[(m + 1) % len(polygon)]
+            sp, sq = side(p), side(q)
+            if sp >= 0:
+                out.append(p)
+            if (sp >= 0) != (sq >= 0):
+                t = sp / (sp - sq)
+                out.append((p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1])))
+        polygon = out
+        if not polygon:
+            return 0.0
+    area = 0.0
+    for m in range(len(polygon)):
+        p, q = polygon[m], polygon[(m + 1) % len(polygon)]
+        area += p[0] * q[1] - q[0] * p[1]
+    return abs(area) / 2
+
+
+def element_difference(original_obj, original_csv, elements_csv, map_csv):
+    """The variant's difference from the original, each original triangle's radiance the
+    area-weighted mean of the variant's elements over it (see the module's `elements`)."""
+    original = read_triangles(original_csv)
+    triangles = read_obj_triangles(original_obj)
+    if len(triangles) != len(original):
+        raise ValueError(f"{original_obj}: {len(triangles)} triangles, {original_csv} has {len(original)}")
+    elements = read_elements(elements_csv)
+    covering = {}
+    for v, o, _, same_side in read_map(map_csv):
+        if same_side:
+            covering.setdefault(o, []).append(v)
+    estimate = []
+    for o, corners in enumerate(triangles):
+        a, b, c = corners
+        n = (
+            (b[1] - a[1]) * (c[2] - a[2]) - (b[2] - a[2]) * (c[1] - a[1]),
+            (b[2] - a[2]) * (c[0] - a[0]) - (b[0] - a[0]) * (c[2] - a[2]),
+            (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]),
+        )
+        drop = max(range(3), key=lambda k: abs(n[k]))
+        axes = [k for k in range(3) if k != drop]
+        # Projected areas back to the plane's: divide by |n_drop| / |n|.
+        stretch = dot(n, n) ** 0.5 / abs(n[drop]) if n[drop] != 0 else 0.0
+        total, weighted = 0.0, [0.0, 0.0, 0.0]
+        for v in covering.get(o, []):
+            for element, rgb in elements.get(v, []):
+                area = clipped_area(element, corners, axes) * stretch
+                total += area
+                for k in range(3):
+                    weighted[k] += area * rgb[k]
+        estimate.append(tuple(x / total for x in weighted) if total > 0 else (0.0, 0.0, 0.0))
+    return relative_error(original, estimate)
+
+
 def count_faces(obj):
     """Triangles of an OBJ file after fan triangulation."""
     n = 0
@@ -248,6 +369,8 @@ def main(argv):
         print(f"{difference(argv[2], argv[3], argv[4]):.6g}")
     elif len(argv) == 5 and argv[1] == "common" and argv[4] != "-":
         print(f"{common_difference(argv[2], argv[3], argv[4]):.6g}")
+    elif len(argv) == 6 and argv[1] == "elements":
+        print(f"{element_difference(argv[2], argv[3], argv[4], argv[5]):.6g}")
     elif len(argv) == 3 and argv[1] == "table":
         table(argv[2])
     else:

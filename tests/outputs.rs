@@ -9,7 +9,8 @@ use antiradiance::output::render::{
     Shading, BACK_FACE_RGB,
 };
 use antiradiance::output::{
-    read_triangles_csv, write_json, write_ply, write_triangles_csv, TRIANGLES_CSV_HEADER,
+    read_triangles_csv, write_elements_csv, write_json, write_ply, write_triangles_csv,
+    ELEMENTS_CSV_HEADER, TRIANGLES_CSV_HEADER,
 };
 use antiradiance::scene::Scene;
 use antiradiance::solve::solution::{Solution, SolveStats};
@@ -94,6 +95,79 @@ fn csv_header_rows_and_round_trip() {
     let back = read_triangles_csv(&path).unwrap();
     assert_eq!(back, solution.triangle_radiance, "bit-exact round trip");
     assert!(dir_is_empty_but(dir.path(), "tri.csv"));
+}
+
+/// The elements CSV of a solve that kept its elements (the Cornell box, whose triangles the
+/// solver splits): every row's triangle exists, each triangle's elements tile it (their areas
+/// sum to its own) and their area-weighted mean radiance is the triangle's result; a solve
+/// that kept none writes its patches.
+#[test]
+fn elements_csv_tiles_each_triangle_with_its_mean() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/cornell_box.obj");
+    let scene = antiradiance::load(&path, &antiradiance::SceneOptions::default()).unwrap();
+    let options = antiradiance::SolverOptions {
+        keep_elements: true,
+        ..antiradiance::SolverOptions::default()
+    };
+    let solved = antiradiance::solve(&scene, None, &options).unwrap();
+    let elements = &solved.solution.elements;
+    assert!(
+        elements.len() > 2 * scene.len(),
+        "{} elements",
+        elements.len()
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("elements.csv");
+    write_elements_csv(&csv, &solved.patches, &solved.solution).unwrap();
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(lines.next(), Some(ELEMENTS_CSV_HEADER));
+    let (mut area, mut weighted) = (vec![0.0; scene.len()], vec![[0.0; 3]; scene.len()]);
+    let mut rows = 0;
+    for (k, line) in lines.enumerate() {
+        let f: Vec<f64> = line.split(',').map(|x| x.parse().unwrap()).collect();
+        assert_eq!(f.len(), 15);
+        assert_eq!(f[0] as usize, k);
+        let t = f[1] as usize;
+        let c: Vec<DVec3> = (0..3)
+            .map(|i| v(f[2 + 3 * i], f[3 + 3 * i], f[4 + 3 * i]))
+            .collect();
+        let a = 0.5 * (c[1] - c[0]).cross(c[2] - c[0]).length();
+        assert!(
+            (a - f[11]).abs() <= 1e-9 * a.max(1.0),
+            "row {k}: area {a} against {}",
+            f[11]
+        );
+        area[t] += a;
+        for ch in 0..3 {
+            weighted[t][ch] += a * f[12 + ch];
+        }
+        rows += 1;
+    }
+    assert_eq!(rows, elements.len());
+    for t in 0..scene.len() {
+        let own = scene.area(t);
+        assert!(
+            (area[t] - own).abs() <= 1e-9 * own,
+            "triangle {t}: {} against {own}",
+            area[t]
+        );
+        let b = solved.solution.triangle_radiance[t];
+        for ch in 0..3 {
+            let mean = weighted[t][ch] / area[t];
+            assert!(
+                (mean - b[ch]).abs() <= 1e-9 * b[ch].abs().max(1e-12),
+                "triangle {t}: {mean} against {}",
+                b[ch]
+            );
+        }
+    }
+    // Without them, the patches.
+    let plain = antiradiance::solve(&scene, None, &antiradiance::SolverOptions::default()).unwrap();
+    assert!(plain.solution.elements.is_empty());
+    write_elements_csv(&csv, &plain.patches, &plain.solution).unwrap();
+    let rows = std::fs::read_to_string(&csv).unwrap().lines().count() - 1;
+    assert_eq!(rows, plain.patches.len());
 }
 
 /// True when the directory holds exactly the one file named (no temporary left behind).

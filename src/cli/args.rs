@@ -246,6 +246,11 @@ pub struct OutputArgs {
     /// input order, r,g,b = outgoing radiance B.
     #[arg(long, value_name = "OUT.csv")]
     pub triangles: Option<PathBuf>,
+    /// Per-element results: CSV `element,triangle,x0,y0,z0,x1,y1,z1,x2,y2,z2,area,r,g,b`, one
+    /// row per solved element (the pieces the hierarchical solver split input triangles into,
+    /// its own resolution), corners in scene units, r,g,b = B of its front face.
+    #[arg(long, value_name = "OUT.csv")]
+    pub elements: Option<PathBuf>,
     /// The mesh (patches) with tone-mapped vertex colours and per-face float radiance.
     #[arg(long, value_name = "OUT.ply")]
     pub ply: Option<PathBuf>,
@@ -317,6 +322,7 @@ impl OutputArgs {
             ("--ply", &self.ply),
             ("--gltf", &self.gltf),
             ("--triangles", &self.triangles),
+            ("--elements", &self.elements),
             ("--report", &self.report),
         ]
         .into_iter()

@@ -19,7 +19,10 @@ pub fn solve(args: &SolveArgs) -> Result<()> {
     let start = Instant::now();
     let mut timings = Timings::default();
     args.scene.validate()?;
-    let options = args.solver_args.options()?;
+    let options = antiradiance::solve::SolverOptions {
+        keep_elements: args.output.elements.is_some(),
+        ..args.solver_args.options()?
+    };
     args.output.validate(&args.scene.scene)?;
 
     let loaded = load(&args.scene, &mut timings)?;

@@ -206,6 +206,9 @@ pub fn write_outputs(output: &OutputArgs, loaded: &Loaded, solution: &Solution) 
     if let Some(path) = &output.triangles {
         output::write_triangles_csv(path, &loaded.scene, solution)?;
     }
+    if let Some(path) = &output.elements {
+        output::write_elements_csv(path, &loaded.patches, solution)?;
+    }
     if let Some(path) = &output.gltf {
         let exposure = output
             .exposure

@@ -18,6 +18,95 @@ pub const TRIANGLES_CSV_HEADER: &str = "index,area,emissive,r,g,b";
 /// face's outgoing radiance (0 for one-sided triangles).
 pub const BACK_COLUMNS: &str = ",back_r,back_g,back_b";
 
+/// The exact header line of the per-element CSV (without the line break).
+pub const ELEMENTS_CSV_HEADER: &str = "element,triangle,x0,y0,z0,x1,y1,z1,x2,y2,z2,area,r,g,b";
+
+/// Writes the solved elements as CSV with the header [`ELEMENTS_CSV_HEADER`]: the solver's
+/// own resolution inside the input triangles it split.
+///
+/// One row per element of `solution.elements` (see
+/// [`crate::solve::SolverOptions::keep_elements`]), in the solver's order: its index, the input
+/// triangle it is part of, its corners in the scene's frame and units, its area (units
+/// squared), and the outgoing radiance B of its front face (RGB, W / (m^2 sr)). A solution
+/// without elements (the dense solver, the path tracer) gets one row per patch, each its
+/// patch's corners and radiance. Floats at full precision; a non-finite value is written as 0.
+pub fn write_elements_csv(
+    path: &Path,
+    patches: &crate::mesh::Patches,
+    solution: &Solution,
+) -> Result<()> {
+    let of_patches: Vec<crate::solve::solution::ElementRadiance>;
+    let elements = if solution.elements.is_empty() {
+        of_patches = (0..patches.len().min(solution.patch_radiance.len()))
+            .map(|p| crate::solve::solution::ElementRadiance {
+                triangle: patches.parent[p],
+                corners: patches.corners[p].map(|c| patches.frame.world_from_unit(c)),
+                radiance: solution.patch_radiance[p],
+            })
+            .collect();
+        &of_patches
+    } else {
+        &solution.elements
+    };
+    let row = |k: usize, out: &mut String| {
+        let e = &elements[k];
+        let [a, b, c] = e.corners;
+        let area = 0.5 * (b - a).cross(c - a).length();
+        let _ = write!(out, "{},{}", k, e.triangle);
+        for v in e.corners {
+            let _ = write!(
+                out,
+                ",{},{},{}",
+                format_f64(v.x),
+                format_f64(v.y),
+                format_f64(v.z)
+            );
+        }
+        let r = e.radiance;
+        let _ = writeln!(
+            out,
+            ",{},{},{},{}",
+            format_f64(area),
+            format_f64(r[0]),
+            format_f64(r[1]),
+            format_f64(r[2])
+        );
+    };
+    write_atomic(path, |w| {
+        writeln!(w, "{ELEMENTS_CSV_HEADER}")?;
+        write_rows(w, elements.len(), 160, &row)
+    })
+}
+
+/// Writes rows `0..n` in order, each formatted by `row` (about `row_bytes` long): blocks of
+/// [`CSV_BLOCK`] rows formatted in parallel, [`CSV_BATCH`] blocks at a time (so the text held
+/// at once stays bounded).
+fn write_rows(
+    w: &mut impl Write,
+    n: usize,
+    row_bytes: usize,
+    row: &(impl Fn(usize, &mut String) + Sync),
+) -> std::io::Result<()> {
+    for batch in (0..n).step_by(CSV_BLOCK * CSV_BATCH) {
+        let blocks: Vec<String> = (batch..n.min(batch + CSV_BLOCK * CSV_BATCH))
+            .step_by(CSV_BLOCK)
+            .collect::<Vec<usize>>()
+            .into_par_iter()
+            .map(|first| {
+                let mut out = String::with_capacity(CSV_BLOCK * row_bytes);
+                for k in first..n.min(first + CSV_BLOCK) {
+                    row(k, &mut out);
+                }
+                out
+            })
+            .collect();
+        for block in blocks {
+            w.write_all(block.as_bytes())?;
+        }
+    }
+    Ok(())
+}
+
 /// Writes the per-input-triangle results as CSV with the header `index,area,emissive,r,g,b`
 /// (and [`BACK_COLUMNS`] when the solution has back faces).
 ///
@@ -64,28 +153,10 @@ pub fn write_triangles_csv(path: &Path, scene: &Scene, solution: &Solution) -> R
         }
         out.push('\n');
     };
-    let n = scene.len();
     write_atomic(path, |w| {
         write!(w, "{TRIANGLES_CSV_HEADER}")?;
         writeln!(w, "{}", if with_back { BACK_COLUMNS } else { "" })?;
-        for batch in (0..n).step_by(CSV_BLOCK * CSV_BATCH) {
-            let blocks: Vec<String> = (batch..n.min(batch + CSV_BLOCK * CSV_BATCH))
-                .step_by(CSV_BLOCK)
-                .collect::<Vec<usize>>()
-                .into_par_iter()
-                .map(|first| {
-                    let mut out = String::with_capacity(CSV_BLOCK * 64);
-                    for t in first..n.min(first + CSV_BLOCK) {
-                        row(t, &mut out);
-                    }
-                    out
-                })
-                .collect();
-            for block in blocks {
-                w.write_all(block.as_bytes())?;
-            }
-        }
-        Ok(())
+        write_rows(w, scene.len(), 64, &row)
     })
 }
 

@@ -23,7 +23,10 @@ pub mod ply;
 pub mod render;
 
 pub use crate::files::{format_f64, write_atomic};
-pub use csv::{read_triangles_csv, write_triangles_csv, TRIANGLES_CSV_HEADER};
+pub use csv::{
+    read_triangles_csv, write_elements_csv, write_triangles_csv, ELEMENTS_CSV_HEADER,
+    TRIANGLES_CSV_HEADER,
+};
 pub use gltf::{write_baked_glb, write_scene_glb};
 pub use ply::write_ply;
 

@@ -97,6 +97,11 @@ pub struct SolverOptions {
     /// ([`crate::memory::default_memory_limit`]: `MemTotal` of `/proc/meminfo`, 4 GiB where that
     /// is unknown), read when the solve starts ([`Self::memory_limit`]).
     pub memory_limit_bytes: Option<u64>,
+    /// Keep every solved element's front radiance in [`crate::solve::Solution::elements`]
+    /// (`--elements`): the solver's own resolution inside input triangles it split, at about
+    /// 100 bytes an element. Default false. The hierarchical solver's elements; the dense
+    /// solver and the path tracer keep none (their elements are the patches).
+    pub keep_elements: bool,
 }
 
 impl Default for SolverOptions {
@@ -128,6 +133,7 @@ impl SolverOptions {
             pair_cache_mb: 256,
             acceleration_depth: 4,
             memory_limit_bytes: None,
+            keep_elements: false,
         }
     }
 

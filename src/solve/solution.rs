@@ -190,6 +190,19 @@ pub struct ModelStats {
     pub bytes_saved: u64,
 }
 
+/// One solved element: a piece of an input triangle (or the whole of it), with the radiance of
+/// its front face.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ElementRadiance {
+    /// The input triangle it is part of (its index among the scene's triangles).
+    pub triangle: u32,
+    /// Corners in the scene's own frame and units, counter-clockwise about its front.
+    pub corners: [glam::DVec3; 3],
+    /// Outgoing radiance B of its front face, RGB, W / (m^2 sr) (negative values clamped to 0
+    /// under `SolverOptions::clamp_negative`).
+    pub radiance: [f64; 3],
+}
+
 /// A solved scene.
 #[derive(Clone, Debug, Default)]
 pub struct Solution {
@@ -206,6 +219,11 @@ pub struct Solution {
     pub triangle_radiance_back: Vec<[f64; 3]>,
     /// How the solve went.
     pub stats: SolveStats,
+    /// Every solved element's front face, in the solver's element order, when
+    /// [`crate::solve::SolverOptions::keep_elements`] asked for them (the hierarchical solver);
+    /// empty otherwise. As solved: a closed object with a dark inside is solved facing out
+    /// (`mesh::closed`), and its elements are its faces turned out.
+    pub elements: Vec<ElementRadiance>,
 }
 
 impl SolveStats {
@@ -251,6 +269,7 @@ impl Solution {
             patch_radiance_back: Vec::new(),
             triangle_radiance_back: Vec::new(),
             stats,
+            elements: Vec::new(),
         };
         solution.settle_inactive(patches);
         solution
@@ -341,6 +360,7 @@ impl Solution {
             patch_radiance_back,
             triangle_radiance_back: Vec::new(),
             stats: self.stats,
+            elements: self.elements,
         };
         solution.settle_inactive(patches);
         solution

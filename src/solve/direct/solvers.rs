@@ -121,8 +121,12 @@ pub fn solve_hierarchical_direct(
     let t_direct = std::time::Instant::now();
     let skip = |mut prepared: Prepared, step: Option<&str>| {
         prepared.note_memory(0, step);
-        let (mut solution, _) = prepared.solve(patches, progress);
+        let (mut solution, state) = prepared.solve(patches, progress);
         solution.stats.direct_light_skipped = true;
+        if options.keep_elements {
+            let clamp = options.clamp_negative;
+            solution.elements = prepared.element_radiance(patches, state.radiance(), false, clamp);
+        }
         solution
     };
     let back_faces = prepared.patches_with_back_faces(patches.len());
@@ -150,6 +154,12 @@ pub fn solve_hierarchical_direct(
     drop(direct);
     prepared.timings.direct = t_direct.elapsed().as_secs_f64();
     let (reflected, state) = prepared.solve_with_source(patches, &source, None, progress);
+    let elements = if options.keep_elements {
+        let clamp = options.clamp_negative;
+        prepared.element_radiance(patches, state.radiance(), true, clamp)
+    } else {
+        Vec::new()
+    };
     // The tree and links are done with: the per-patch results below need not sit on them.
     drop((prepared, source));
     // `reflected` is R clamped and scaled; B is formed from the unclamped element values.
@@ -161,14 +171,16 @@ pub fn solve_hierarchical_direct(
     };
     let mut stats = without_negative_check(reflected.stats);
     stats.direct = Some(direct_stats);
-    Ok(finish_sides(
+    let mut solution = finish_sides(
         patches,
         radiance,
         radiance_back,
         stats,
         options.clamp_negative,
         emission_bound(patches, options.antiradiance),
-    ))
+    );
+    solution.elements = elements;
+    Ok(solution)
 }
 
 /// Solves the scene with the dense solver and exact direct light (the reflected direct light is

@@ -388,6 +388,48 @@ impl Prepared {
         self.elements().chain(backs)
     }
 
+    /// Every element's front face ([`Prepared::elements`]) with its radiance `radiance[e]`
+    /// (normalized units, as a solve's [`ElementState`] holds the fronts), plus its patch's
+    /// emission when `with_emission` (a solve whose source was the reflected direct light), in
+    /// the scene's frame and units; negative radiance clamped to 0 when `clamp`
+    /// ([`crate::solve::Solution::elements`]).
+    ///
+    /// # Panics
+    /// When `radiance` holds fewer values than there are elements.
+    pub fn element_radiance(
+        &self,
+        patches: &Patches,
+        radiance: &[[f64; 3]],
+        with_emission: bool,
+        clamp: bool,
+    ) -> Vec<crate::solve::solution::ElementRadiance> {
+        let frame = &patches.frame;
+        self.elements()
+            .zip(radiance)
+            .map(|(element, b)| {
+                let p = element.patch as usize;
+                let emitted = if with_emission {
+                    patches.emission[p]
+                } else {
+                    [0.0; 3]
+                };
+                let radiance = [0, 1, 2].map(|c| {
+                    let x = crate::files::sanitize((b[c] + emitted[c]) * patches.emission_scale);
+                    if clamp {
+                        x.max(0.0)
+                    } else {
+                        x
+                    }
+                });
+                crate::solve::solution::ElementRadiance {
+                    triangle: patches.parent[p],
+                    corners: element.corners.map(|c| frame.world_from_unit(c)),
+                    radiance,
+                }
+            })
+            .collect()
+    }
+
     /// Per patch (of `patches` patches): some element of it has a back face
     /// ([`Prepared::faces`]).
     pub fn patches_with_back_faces(&self, patches: usize) -> Vec<bool> {
@@ -778,7 +820,12 @@ pub fn solve_hierarchical(
     progress: &Progress,
 ) -> Result<Solution> {
     let mut prepared = Prepared::new(patches, options, false)?;
-    Ok(prepared.solve(patches, progress).0)
+    let (mut solution, state) = prepared.solve(patches, progress);
+    if options.keep_elements {
+        let clamp = options.clamp_negative;
+        solution.elements = prepared.element_radiance(patches, state.radiance(), false, clamp);
+    }
+    Ok(solution)
 }
 
 /// Cluster links into element `e` and into each of its ancestors that are gathered per
