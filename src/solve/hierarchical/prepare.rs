@@ -398,8 +398,15 @@ impl Prepared {
         // (with their cached terms once kept) and their per-sweep sums.
         let sweep_sums = (self.fields).sweep_bytes(link_budget.costs.channels() as usize);
         let pair_bytes = self.pairs.as_ref().map_or(0, PairCache::bytes);
-        let held =
-            |fields: &Fields| costs.bytes(&counts) + pair_bytes + fields.bytes() + sweep_sums;
+        // The solved elements, when kept, are made while the model is held.
+        let kept_elements = if options.keep_elements {
+            n * std::mem::size_of::<crate::solve::solution::ElementRadiance>() as u64
+        } else {
+            0
+        };
+        let held = |fields: &Fields| {
+            costs.bytes(&counts) + pair_bytes + fields.bytes() + sweep_sums + kept_elements
+        };
         let history_live = history(self, self.live.slots() as u64);
         // The field links' terms, as many fields' as fit what the pair cache left of its
         // budget.
