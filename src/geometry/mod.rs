@@ -316,13 +316,7 @@ fn lambert_form_factor_lanes(sum: Lanes) -> Lanes {
 /// coordinates in `points`), all with normal `n_x`. Same precondition; equal to the one-point
 /// function to rounding.
 pub fn point_form_factor_lanes(points: &[Lanes; 3], n_x: DVec3, tri: &Tri) -> Lanes {
-    let r = tri.map(|v| {
-        [
-            Lanes::splat(v.x) - points[0],
-            Lanes::splat(v.y) - points[1],
-            Lanes::splat(v.z) - points[2],
-        ]
-    });
+    let r = corner_vectors(tri, points);
     let mut lambert = Lanes::ZERO;
     for i in 0..3 {
         lambert += lambert_edge_lanes(&r[i], &r[(i + 1) % 3], n_x).0;
@@ -334,35 +328,19 @@ pub fn point_form_factor_lanes(points: &[Lanes; 3], n_x: DVec3, tri: &Tri) -> La
 /// (`LANES` edges at a time): a closed contour's sum, for [`lambert_form_factor`]. Equal to the
 /// edge-by-edge sum to rounding.
 pub fn lambert_edges_sum(x: DVec3, n_x: DVec3, edges: &[(DVec3, DVec3)]) -> f64 {
+    let relative = |ends: smallvec::SmallVec<[DVec3; LANES]>| {
+        let p = lanes_of(&ends);
+        [p[0] - x.x, p[1] - x.y, p[2] - x.z]
+    };
     let mut sum = Lanes::ZERO;
     for chunk in edges.chunks(LANES) {
         // Lanes past the chunk repeat its last edge and are masked out.
-        let a = lanes_of_relative(chunk.iter().map(|e| e.0), x);
-        let b = lanes_of_relative(chunk.iter().map(|e| e.1), x);
+        let a = relative(chunk.iter().map(|e| e.0).collect());
+        let b = relative(chunk.iter().map(|e| e.1).collect());
         let term = lambert_edge_lanes(&a, &b, n_x).0;
         sum += lane_below(chunk.len()).select(term, Lanes::ZERO);
     }
     sum.reduce_add()
-}
-
-/// Up to `LANES` points minus `x`, as x, y and z lanes, the last repeated to fill them.
-#[inline(always)]
-fn lanes_of_relative(points: impl Iterator<Item = DVec3>, x: DVec3) -> [Lanes; 3] {
-    let mut v = [[0.0; LANES]; 3];
-    let mut last = 0;
-    for (l, p) in points.enumerate() {
-        let d = p - x;
-        v[0][l] = d.x;
-        v[1][l] = d.y;
-        v[2][l] = d.z;
-        last = l;
-    }
-    for l in last + 1..LANES {
-        for c in &mut v {
-            c[l] = c[last];
-        }
-    }
-    v.map(Lanes::new)
 }
 
 /// The mask of the lanes below `n` (all of them from `LANES` on).
@@ -408,13 +386,20 @@ pub fn lanes_of(points: &[DVec3]) -> [Lanes; 3] {
 /// [`solid_angle`] of `tri` seen from `LANES` points at once (their x, y and z coordinates in
 /// `points`). Equal to the one-point function to rounding.
 pub fn solid_angle_lanes(points: &[Lanes; 3], tri: &Tri) -> Lanes {
-    solid_angle_of_corner_vectors(tri.map(|v| {
+    solid_angle_of_corner_vectors(corner_vectors(tri, points))
+}
+
+/// The corner vectors of `tri` (corner minus viewpoint) from each of `LANES` points (their x, y
+/// and z coordinates in `points`).
+#[inline(always)]
+fn corner_vectors(tri: &Tri, points: &[Lanes; 3]) -> [[Lanes; 3]; 3] {
+    tri.map(|v| {
         [
             Lanes::splat(v.x) - points[0],
             Lanes::splat(v.y) - points[1],
             Lanes::splat(v.z) - points[2],
         ]
-    }))
+    })
 }
 
 /// [`solid_angle`] of up to `LANES` triangles `tris` seen from one point `x`, in the first

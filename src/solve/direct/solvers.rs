@@ -123,10 +123,7 @@ pub fn solve_hierarchical_direct(
         prepared.note_memory(0, step);
         let (mut solution, state) = prepared.solve(patches, progress);
         solution.stats.direct_light_skipped = true;
-        if options.keep_elements {
-            let clamp = options.clamp_negative;
-            solution.elements = prepared.element_radiance(patches, state.radiance(), false, clamp);
-        }
+        solution.elements = prepared.kept_elements(patches, state.radiance(), false);
         solution
     };
     let back_faces = prepared.patches_with_back_faces(patches.len());
@@ -154,12 +151,7 @@ pub fn solve_hierarchical_direct(
     drop(direct);
     prepared.timings.direct = t_direct.elapsed().as_secs_f64();
     let (reflected, state) = prepared.solve_with_source(patches, &source, None, progress);
-    let elements = if options.keep_elements {
-        let clamp = options.clamp_negative;
-        prepared.element_radiance(patches, state.radiance(), true, clamp)
-    } else {
-        Vec::new()
-    };
+    let elements = prepared.kept_elements(patches, state.radiance(), true);
     // The tree and links are done with: the per-patch results below need not sit on them.
     drop((prepared, source));
     // `reflected` is R clamped and scaled; B is formed from the unclamped element values.

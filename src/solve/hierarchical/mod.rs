@@ -388,22 +388,25 @@ impl Prepared {
         self.elements().chain(backs)
     }
 
-    /// Every element's front face ([`Prepared::elements`]) with its radiance `radiance[e]`
-    /// (normalized units, as a solve's [`ElementState`] holds the fronts), plus its patch's
-    /// emission when `with_emission` (a solve whose source was the reflected direct light), in
-    /// the scene's frame and units; negative radiance clamped to 0 when `clamp`
-    /// ([`crate::solve::Solution::elements`]).
+    /// What [`crate::solve::Solution::elements`] keeps of a solve: empty unless
+    /// [`SolverOptions::keep_elements`], else every element's front face
+    /// ([`Prepared::elements`]) with its radiance `radiance[e]` (normalized units, as a solve's
+    /// [`ElementState`] holds the fronts), plus its patch's emission when `with_emission` (a
+    /// solve whose source was the reflected direct light), in the scene's frame and units;
+    /// negative radiance clamped to 0 under [`SolverOptions::clamp_negative`].
     ///
     /// # Panics
     /// When `radiance` holds fewer values than there are elements.
-    pub fn element_radiance(
+    pub fn kept_elements(
         &self,
         patches: &Patches,
         radiance: &[[f64; 3]],
         with_emission: bool,
-        clamp: bool,
     ) -> Vec<crate::solve::solution::ElementRadiance> {
-        let frame = &patches.frame;
+        if !self.options.keep_elements {
+            return Vec::new();
+        }
+        let (frame, clamp) = (&patches.frame, self.options.clamp_negative);
         self.elements()
             .zip(radiance)
             .map(|(element, b)| {
@@ -821,10 +824,7 @@ pub fn solve_hierarchical(
 ) -> Result<Solution> {
     let mut prepared = Prepared::new(patches, options, false)?;
     let (mut solution, state) = prepared.solve(patches, progress);
-    if options.keep_elements {
-        let clamp = options.clamp_negative;
-        solution.elements = prepared.element_radiance(patches, state.radiance(), false, clamp);
-    }
+    solution.elements = prepared.kept_elements(patches, state.radiance(), false);
     Ok(solution)
 }
 

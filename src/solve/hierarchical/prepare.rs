@@ -396,7 +396,7 @@ impl Prepared {
         self.fields.keep_live(&self.tree, &self.live);
         // What the model holds: the links' and elements' arrays, the pair cache, the fields
         // (with their cached terms once kept) and their per-sweep sums.
-        let sweep_sums = (self.fields).sweep_bytes(link_budget.costs.channels() as usize);
+        let sweep_sums = self.fields.sweep_bytes(channels);
         let pair_bytes = self.pairs.as_ref().map_or(0, PairCache::bytes);
         // The solved elements, when kept, are made while the model is held.
         let kept_elements = if options.keep_elements {
