@@ -423,6 +423,13 @@ impl Guard {
         self.deep_rows = max_row_sum > DAMP_ROW_SUM;
     }
 
+    /// True when the first sweep's largest row sum was above [`DAMP_ROW_SUM`]
+    /// ([`Guard::note_rows`]): the antiradiance is damped from the second sweep, and the solve
+    /// has many sweeps ahead.
+    pub fn deep_rows(&self) -> bool {
+        self.deep_rows
+    }
+
     /// Checks sweep `sweep` (1-based): its relative `residual`, the area-weighted L1 mass of
     /// the change it made (`change`, same units and channel sum as `reference_mass`), its
     /// largest |B| (`largest`) and whether every value it wrote was finite (`finite`).

@@ -284,6 +284,7 @@ impl Prepared {
             let swept = iteration + 1 - first;
             let long = |left: f64| left >= LATE_PAIR_CACHE_SWEEPS as f64;
             if swept == LATE_PAIR_CACHE_SWEEPS
+                || (swept == 1 && guard.deep_rows())
                 || (swept == MIN_SWEEPS && convergence.sweeps_left(tol).is_some_and(long))
             {
                 self.late_pair_cache(&mut memory);

@@ -189,6 +189,78 @@ fn a_long_solve_builds_its_pair_cache_late() {
     }
 }
 
+/// A floor under a light, with `plates` 2 x 2 plates stacked between them 5 cm apart, facing
+/// down: the floor sees every plate's front, unoccluded, so its rows sum to about one form
+/// factor a plate.
+fn stacked_plates(plates: usize) -> crate::mesh::Patches {
+    let v = DVec3::new;
+    let mut corners = Vec::new();
+    let (mut albedo, mut emission) = (Vec::new(), Vec::new());
+    let mut quad = |q: [DVec3; 4], rho: f64, e: f64| {
+        for tri in [[q[0], q[1], q[2]], [q[0], q[2], q[3]]] {
+            corners.push(tri);
+            albedo.push([rho; 3]);
+            emission.push([e; 3]);
+        }
+    };
+    quad(
+        [v(0., 0., 0.), v(0., 0., 4.), v(4., 0., 4.), v(4., 0., 0.)],
+        0.75,
+        0.0,
+    );
+    quad(
+        [v(1., 3., 1.), v(3., 3., 1.), v(3., 3., 3.), v(1., 3., 3.)],
+        0.0,
+        1.0,
+    );
+    for k in 0..plates {
+        let y = 0.3 + 0.05 * k as f64;
+        quad(
+            [v(1., y, 1.), v(3., y, 1.), v(3., y, 3.), v(1., y, 3.)],
+            0.75,
+            0.0,
+        );
+    }
+    build_patches(
+        &crate::scene::Scene::from_triangles(&corners, &albedo, &emission),
+        None,
+    )
+}
+
+/// A solve whose first sweep's rows damp its antiradiance from the second
+/// ([`crate::solve::health::DAMP_ROW_SUM`]) builds the pair cache it was built without right
+/// after that sweep; one whose rows do not, does not.
+#[test]
+fn a_solve_with_deep_rows_builds_its_pair_cache_after_its_first_sweep() {
+    let hidden = Progress::hidden();
+    for (plates, deep) in [(8, true), (1, false)] {
+        let patches = stacked_plates(plates);
+        let options = SolverOptions {
+            pair_cache_mb: 0,
+            max_iterations: 1,
+            direct_light: false,
+            ..SolverOptions::default()
+        };
+        let mut prepared = match Prepared::new(&patches, &options, false) {
+            Ok(prepared) => prepared,
+            Err(e) => panic!("the plates do not fit: {e}"),
+        };
+        prepared.options.pair_cache_mb = 1;
+        let (solution, _) = prepared.solve(&patches, &hidden);
+        let rows = solution.stats.max_row_sum;
+        assert_eq!(
+            rows > crate::solve::health::DAMP_ROW_SUM,
+            deep,
+            "{plates} plates: rows {rows}"
+        );
+        assert_eq!(
+            prepared.pairs.is_some(),
+            deep,
+            "{plates} plates: rows {rows}"
+        );
+    }
+}
+
 /// The field links' cached terms give the sweeps of the solve that computes them each sweep,
 /// and count in the memory estimate: the 4k-triangle Cornell box with the pair cache's
 /// budget (which the terms share: every field's terms kept) and with 8 MB (the first fields'
