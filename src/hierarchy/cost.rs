@@ -173,9 +173,10 @@ pub struct OverBudget {
     /// The estimate when it stopped (bytes, without slack).
     pub estimate: u64,
     /// Bytes per element that the solve would have added beside the model (its fields'
-    /// per-sweep sums, the Anderson history, the exact direct light's result) when the model
-    /// was refused only once built, with them beside it; 0 when the refinement itself stopped.
-    /// The next attempt's refinement counts them ([`LinkBudget::reserve_per_element`]).
+    /// per-sweep sums, the Anderson history, the exact direct light's result, the solved
+    /// elements when they are kept) when the model was refused only once built, with them
+    /// beside it; 0 when the refinement itself stopped. The next attempt's refinement counts
+    /// them ([`LinkBudget::reserve_per_element`]).
     pub solve_bytes_per_element: u64,
 }
 

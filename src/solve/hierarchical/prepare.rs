@@ -372,10 +372,19 @@ impl Prepared {
         // The fields and their per-sweep sums, every slot's until the live bins are known (an
         // upper bound).
         let fields_bytes = self.fields.bytes() + self.fields.sweep_bytes(channels);
+        // The solved elements, when kept, are made while the model is held.
+        let kept_elements = if options.keep_elements {
+            n * std::mem::size_of::<crate::solve::solution::ElementRadiance>() as u64
+        } else {
+            0
+        };
         let history_all_bins = history(self, counts.slots.unwrap_or(0));
         match PairCache::build(
             &*self,
-            own.min(budget.spare(costs.bytes(&counts) + history_all_bins + fields_bytes)),
+            own.min(
+                budget
+                    .spare(costs.bytes(&counts) + history_all_bins + fields_bytes + kept_elements),
+            ),
         ) {
             Ok(cache) => {
                 self.pairs = Some(cache);
@@ -386,7 +395,8 @@ impl Prepared {
                 counts.slots = Some(self.live.slots() as u64);
                 if cache_bytes <= own {
                     let history_live = history(self, self.live.slots() as u64);
-                    let spare = budget.spare(costs.bytes(&counts) + history_live + fields_bytes);
+                    let spare = budget
+                        .spare(costs.bytes(&counts) + history_live + fields_bytes + kept_elements);
                     self.pairs = PairCache::build(&*self, own.min(spare)).ok();
                     cache_dropped = self.pairs.is_none();
                 }
@@ -398,12 +408,6 @@ impl Prepared {
         // (with their cached terms once kept) and their per-sweep sums.
         let sweep_sums = self.fields.sweep_bytes(channels);
         let pair_bytes = self.pairs.as_ref().map_or(0, PairCache::bytes);
-        // The solved elements, when kept, are made while the model is held.
-        let kept_elements = if options.keep_elements {
-            n * std::mem::size_of::<crate::solve::solution::ElementRadiance>() as u64
-        } else {
-            0
-        };
         let held = |fields: &Fields| {
             costs.bytes(&counts) + pair_bytes + fields.bytes() + sweep_sums + kept_elements
         };
@@ -421,8 +425,8 @@ impl Prepared {
         let estimate = held(&self.fields);
         if !budget.fits(estimate + history_live) {
             // What the fit adds to the model's arrays, but for the pair cache (which takes what
-            // is spare).
-            let beside = self.fields.bytes() + sweep_sums + history_live;
+            // is spare), with the solved elements when they are kept.
+            let beside = self.fields.bytes() + sweep_sums + history_live + kept_elements;
             return Err(OverBudget {
                 estimate,
                 solve_bytes_per_element: beside / self.element_count().max(1) as u64,

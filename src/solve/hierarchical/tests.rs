@@ -575,6 +575,43 @@ fn a_model_refused_for_its_solve_reserves_it_in_the_next_refinement() {
     assert!(tight.fits(estimate));
 }
 
+/// A model refused once built counts the solved elements it would keep
+/// ([`SolverOptions::keep_elements`]) in what its solve adds per element.
+#[test]
+fn a_refused_model_reserves_the_elements_it_would_keep() {
+    let per_element = |keep_elements| {
+        let options = SolverOptions {
+            direct_light: false,
+            pair_cache_mb: 0,
+            keep_elements,
+            ..SolverOptions::default()
+        };
+        let (patches, prepared) = box_without_limit(&options);
+        // A limit the model fits but not its history: refused once built.
+        let tight = crate::memory::Budget {
+            limit: crate::memory::with_slack(prepared.memory.estimate_bytes),
+            base: 0,
+        };
+        let link_budget = LinkBudget {
+            costs: HierarchicalCosts::new(options.bins, channels_needed(&patches)),
+            budget: tight,
+            patches: patches.len() as u64,
+            reserve_per_element: 0,
+        };
+        let mut base = BaseTree::new(&patches, &options);
+        match Prepared::build(&patches, &options, false, &link_budget, &mut base) {
+            Ok(_) => panic!("fitted beside its history at {}", tight.limit),
+            Err(over) => over.solve_bytes_per_element,
+        }
+    };
+    let (without, with) = (per_element(false), per_element(true));
+    let kept = std::mem::size_of::<crate::solve::solution::ElementRadiance>() as u64;
+    assert!(
+        with >= without + kept - 1 && with <= without + kept + 1,
+        "{with} with the elements kept against {without} + {kept}"
+    );
+}
+
 /// The pair cache gets only what the model, its fields' per-sweep sums and the Anderson
 /// history leave: a model that fits without a cache is not refused for one (b90_office at
 /// 2 GB had its cache take the room of the fields' sums, and the model that fitted without the
