@@ -73,9 +73,10 @@ pub struct SolverOptions {
     /// [`Self::field_ratio`]); 0 disables it. 256 by default: the seed room's pairs take 1.3 MB
     /// and the 258k-triangle box's 35 MB; at 1024 the 1M-triangle box cached 523 MB of them
     /// and peaked at 4.4 GB. A solve still sweeping after 10 sweeps, or whose first 3 sweeps
-    /// predict 10 more, builds the cache then, larger than this if need be, within what the
-    /// memory limit leaves: the sweeps that remain pay for it many times over (b90_office, 26
-    /// sweeps: about 550 MB, built after its third). When the pairs do not fit it at the
+    /// predict 10 more, or whose first sweep's rows damp it, builds the cache then, larger than
+    /// this if need be, within what the memory limit leaves: the sweeps that remain pay for it
+    /// many times over (b90_office, 14 sweeps: about 550 MB, built after its first). When the
+    /// pairs do not fit it at the
     /// start, near links into large receivers are pushed down into the receivers' children
     /// where that costs the sweeps less (the 1M-triangle box: 133M pairs a sweep -> 28M).
     pub pair_cache_mb: usize,
