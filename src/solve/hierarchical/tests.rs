@@ -189,6 +189,22 @@ fn a_long_solve_builds_its_pair_cache_late() {
     }
 }
 
+/// The model of `patches` under `options` built without a pair cache (0 MB disables it), then
+/// allowed one of 1 MB, which its factors do not fit up front but which does not bound the
+/// late cache ([`LATE_PAIR_CACHE_SWEEPS`]).
+fn late_cache_allowed(patches: &crate::mesh::Patches, options: SolverOptions) -> Prepared {
+    let options = SolverOptions {
+        pair_cache_mb: 0,
+        ..options
+    };
+    let mut prepared = match Prepared::new(patches, &options, false) {
+        Ok(prepared) => prepared,
+        Err(e) => panic!("the model does not fit: {e}"),
+    };
+    prepared.options.pair_cache_mb = 1;
+    prepared
+}
+
 /// A floor under a light, with `plates` 2 x 2 plates stacked between them 5 cm apart, facing
 /// down: the floor sees every plate's front, unoccluded, so its rows sum to about one form
 /// factor a plate.
@@ -236,16 +252,11 @@ fn a_solve_with_deep_rows_builds_its_pair_cache_after_its_first_sweep() {
     for (plates, deep) in [(8, true), (1, false)] {
         let patches = stacked_plates(plates);
         let options = SolverOptions {
-            pair_cache_mb: 0,
             max_iterations: 1,
             direct_light: false,
             ..SolverOptions::default()
         };
-        let mut prepared = match Prepared::new(&patches, &options, false) {
-            Ok(prepared) => prepared,
-            Err(e) => panic!("the plates do not fit: {e}"),
-        };
-        prepared.options.pair_cache_mb = 1;
+        let mut prepared = late_cache_allowed(&patches, options);
         let (solution, _) = prepared.solve(&patches, &hidden);
         let rows = solution.stats.max_row_sum;
         assert_eq!(
@@ -318,18 +329,13 @@ fn a_solve_predicted_long_builds_its_pair_cache_after_its_first_sweeps() {
     let hidden = Progress::hidden();
     let cached_after_min_sweeps = |acceleration_depth, tol| {
         let options = SolverOptions {
-            pair_cache_mb: 0,
             acceleration_depth,
             tol,
             max_iterations: crate::solve::MIN_SWEEPS,
             direct_light: false,
             ..SolverOptions::default()
         };
-        let mut prepared = match Prepared::new(&patches, &options, false) {
-            Ok(prepared) => prepared,
-            Err(e) => panic!("the box does not fit: {e}"),
-        };
-        prepared.options.pair_cache_mb = 1;
+        let mut prepared = late_cache_allowed(&patches, options);
         assert!(prepared.pairs.is_none());
         let (solution, _) = prepared.solve(&patches, &hidden);
         assert_eq!(solution.stats.iterations, crate::solve::MIN_SWEEPS);
