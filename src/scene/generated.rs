@@ -52,7 +52,7 @@ pub const CORNELL_BOX_TRIANGLES: usize = 46;
 
 /// Collects triangles with their materials, then builds a [`Scene`].
 #[derive(Default)]
-struct Builder {
+pub(crate) struct Builder {
     corners: Vec<[DVec3; 3]>,
     albedo: Vec<[f64; 3]>,
     emission: Vec<[f64; 3]>,
@@ -87,7 +87,13 @@ impl Builder {
 
     /// Adds a quad as `(q0, q1, q2), (q0, q2, q3)`, with the vertex order reversed first when
     /// needed so that the front side faces `facing`.
-    fn quad(&mut self, q: [DVec3; 4], facing: DVec3, albedo: [f64; 3], emission: [f64; 3]) {
+    pub(crate) fn quad(
+        &mut self,
+        q: [DVec3; 4],
+        facing: DVec3,
+        albedo: [f64; 3],
+        emission: [f64; 3],
+    ) {
         let n = (q[1] - q[0]).cross(q[2] - q[0]) + (q[2] - q[0]).cross(q[3] - q[0]);
         let q = if n.dot(facing) >= 0.0 {
             q
@@ -134,7 +140,8 @@ impl Builder {
         }
     }
 
-    fn build(self) -> Scene {
+    /// The scene of the triangles added.
+    pub(crate) fn build(self) -> Scene {
         Scene::from_triangles(&self.corners, &self.albedo, &self.emission)
     }
 }

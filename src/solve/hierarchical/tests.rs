@@ -210,37 +210,18 @@ fn late_cache_allowed(patches: &crate::mesh::Patches, options: SolverOptions) ->
 /// factor a plate.
 fn stacked_plates(plates: usize) -> crate::mesh::Patches {
     let v = DVec3::new;
-    let mut corners = Vec::new();
-    let (mut albedo, mut emission) = (Vec::new(), Vec::new());
-    let mut quad = |q: [DVec3; 4], rho: f64, e: f64| {
-        for tri in [[q[0], q[1], q[2]], [q[0], q[2], q[3]]] {
-            corners.push(tri);
-            albedo.push([rho; 3]);
-            emission.push([e; 3]);
-        }
-    };
-    quad(
-        [v(0., 0., 0.), v(0., 0., 4.), v(4., 0., 4.), v(4., 0., 0.)],
-        0.75,
-        0.0,
-    );
-    quad(
-        [v(1., 3., 1.), v(3., 3., 1.), v(3., 3., 3.), v(1., 3., 3.)],
-        0.0,
-        1.0,
-    );
+    let (up, down) = (DVec3::Y, -DVec3::Y);
+    let mut b = generated::Builder::default();
+    let floor = [v(0., 0., 0.), v(0., 0., 4.), v(4., 0., 4.), v(4., 0., 0.)];
+    b.quad(floor, up, [0.75; 3], [0.0; 3]);
+    let light = [v(1., 3., 1.), v(3., 3., 1.), v(3., 3., 3.), v(1., 3., 3.)];
+    b.quad(light, down, [0.0; 3], [1.0; 3]);
     for k in 0..plates {
         let y = 0.3 + 0.05 * k as f64;
-        quad(
-            [v(1., y, 1.), v(3., y, 1.), v(3., y, 3.), v(1., y, 3.)],
-            0.75,
-            0.0,
-        );
+        let plate = [v(1., y, 1.), v(3., y, 1.), v(3., y, 3.), v(1., y, 3.)];
+        b.quad(plate, down, [0.75; 3], [0.0; 3]);
     }
-    build_patches(
-        &crate::scene::Scene::from_triangles(&corners, &albedo, &emission),
-        None,
-    )
+    build_patches(&b.build(), None)
 }
 
 /// A solve whose first sweep's rows damp its antiradiance from the second
