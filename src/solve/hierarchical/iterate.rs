@@ -187,11 +187,12 @@ impl Prepared {
             (going_on, state_len_of::<C>(n + backs, slots)),
             (&mut convergence, &mut guard, &mut stats),
         );
-        let (mut anderson, mut memory) = self.accelerate::<C>(
-            kept_anderson,
-            going_on,
+        let mut memory = self.memory.clone();
+        let mut anderson = self.accelerate::<C>(
+            (kept_anderson, going_on, false),
             rho_max,
             (&mut stats, &mut convergence),
+            &mut memory,
         );
         let earlier =
             self.kept_states(warm, (matched && same_source_len, same_source), &mut memory);
@@ -263,6 +264,28 @@ impl Prepared {
                 }
                 if let Some(w) = window.as_mut() {
                     w.start.clear();
+                }
+            }
+            // Deep rows: the damped sweeps may still amplify a mode that only mixing settles, so
+            // a solve whose history was over its own budget takes it now, within the limit.
+            if iteration == first
+                && guard.deep_rows()
+                && anderson.is_none()
+                && self.options.acceleration_depth > 0
+                && self.history_bytes(C) > self.acceleration_budget
+            {
+                anderson = self.accelerate::<C>(
+                    (None, going_on, true),
+                    rho_max,
+                    (&mut stats, &mut convergence),
+                    &mut memory,
+                );
+                if anderson.is_some() {
+                    two_back = None;
+                    window = Some(Window::<C> {
+                        start: Vec::new(),
+                        sweeps: 0,
+                    });
                 }
             }
             if self.settle_sweep(
@@ -654,13 +677,13 @@ impl Prepared {
     /// unless the solve goes on from a previous one).
     fn accelerate<const C: usize>(
         &self,
-        kept_anderson: Option<Anderson>,
-        going_on: bool,
+        (kept_anderson, going_on, deep): (Option<Anderson>, bool, bool),
         rho_max: f64,
         (stats, convergence): (&mut SolveStats, &mut Convergence),
-    ) -> (Option<Anderson>, MemoryStats) {
-        let mut memory = self.memory.clone();
-        let (anderson, acceleration) = self.acceleration::<C>(kept_anderson, going_on, &mut memory);
+        memory: &mut MemoryStats,
+    ) -> Option<Anderson> {
+        let (anderson, acceleration) =
+            self.acceleration::<C>(kept_anderson, (going_on, deep), memory);
         stats.acceleration = acceleration;
         if anderson.is_some() {
             convergence.contraction_bound = Some(rho_max);
@@ -668,16 +691,18 @@ impl Prepared {
                 stats.extrapolations = 0;
             }
         }
-        (anderson, memory)
+        anderson
     }
 
     /// Anderson acceleration for a solve (`kept` the previous solve's history, reset to a new
     /// source unless `going_on`), or why not, as `stats.acceleration` says it; its history is
-    /// added to `memory`'s estimate, or its absence to what was coarsened.
+    /// added to `memory`'s estimate, or its absence to what was coarsened. A solve whose first
+    /// sweep found `deep` rows ([`crate::solve::health::Guard::deep_rows`]) takes it whatever
+    /// [`ACCELERATION_BUDGET_BYTES`] says, within the memory limit.
     fn acceleration<const C: usize>(
         &self,
         kept_anderson: Option<Anderson>,
-        going_on: bool,
+        (going_on, deep): (bool, bool),
         memory: &mut MemoryStats,
     ) -> (Option<Anderson>, String) {
         let (options, live) = (&self.options, &self.live);
@@ -693,11 +718,11 @@ impl Prepared {
         let mb = |bytes: u64| bytes.div_ceil(1 << 20);
         let off = if depth == 0 {
             Some("acceleration_depth 0".to_string())
-        } else if history > ACCELERATION_BUDGET_BYTES {
+        } else if history > self.acceleration_budget && !deep {
             Some(format!(
                 "Anderson history of {} MB over its {} MB budget",
                 mb(history),
-                mb(ACCELERATION_BUDGET_BYTES)
+                mb(self.acceleration_budget)
             ))
         } else if history > self.budget.spare(self.sweep_bytes) {
             memory.coarsened.push("Anderson acceleration off".into());
@@ -758,7 +783,7 @@ impl Prepared {
     /// over [`ACCELERATION_BUDGET_BYTES`]; see [`Self::acceleration`]).
     pub(super) fn planned_history_bytes(&self, slots: usize, channels: usize) -> u64 {
         let bytes = self.history_bytes_with(slots, channels);
-        if self.options.acceleration_depth > 0 && bytes <= ACCELERATION_BUDGET_BYTES {
+        if self.options.acceleration_depth > 0 && bytes <= self.acceleration_budget {
             bytes
         } else {
             0

@@ -260,6 +260,7 @@ impl Prepared {
             bins,
             options: options.clone(),
             budget: link_budget.budget,
+            acceleration_budget: super::ACCELERATION_BUDGET_BYTES,
             state_bytes: 0,
             sweep_bytes: 0,
             memory: MemoryStats::default(),

@@ -253,6 +253,43 @@ fn a_solve_with_deep_rows_builds_its_pair_cache_after_its_first_sweep() {
     }
 }
 
+/// A solve whose first sweep's rows damp its antiradiance takes its Anderson history after that
+/// sweep, though the history is over the solver's own budget ([`ACCELERATION_BUDGET_BYTES`],
+/// here 0); one whose rows do not, extrapolates.
+#[test]
+fn a_solve_with_deep_rows_takes_its_anderson_history_over_its_own_budget() {
+    let hidden = Progress::hidden();
+    for (plates, deep) in [(8, true), (1, false)] {
+        let patches = stacked_plates(plates);
+        let options = SolverOptions {
+            max_iterations: 3,
+            direct_light: false,
+            ..SolverOptions::default()
+        };
+        let mut prepared = match Prepared::new(&patches, &options, false) {
+            Ok(prepared) => prepared,
+            Err(e) => panic!("the model does not fit: {e}"),
+        };
+        prepared.acceleration_budget = 0;
+        let (solution, _) = prepared.solve(&patches, &hidden);
+        let (rows, acceleration) = (solution.stats.max_row_sum, &solution.stats.acceleration);
+        assert_eq!(
+            rows > crate::solve::health::DAMP_ROW_SUM,
+            deep,
+            "{plates} plates: rows {rows}"
+        );
+        if deep {
+            assert_eq!(acceleration, "anderson", "{plates} plates: rows {rows}");
+        } else {
+            assert!(
+                acceleration.starts_with("extrapolation (Anderson history of")
+                    && acceleration.ends_with("over its 0 MB budget)"),
+                "{plates} plates: {acceleration}"
+            );
+        }
+    }
+}
+
 /// The field links' cached terms give the sweeps of the solve that computes them each sweep,
 /// and count in the memory estimate: the 4k-triangle Cornell box with the pair cache's
 /// budget (which the terms share: every field's terms kept) and with 8 MB (the first fields'
