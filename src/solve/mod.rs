@@ -14,6 +14,7 @@ pub mod hierarchical;
 pub mod model;
 pub mod options;
 pub mod relight;
+pub mod sealed;
 pub mod solution;
 pub mod warnings;
 
@@ -128,6 +129,13 @@ pub fn run(
         None
     };
     let solved = outward.as_ref().map_or(patches, |(p, _)| p);
+    // One-sided fronts the light does not reach are solved black (see `sealed`).
+    let sealed = if options.antiradiance && options.block_exposed_backs && !options.two_sided {
+        sealed::blackened(solved)
+    } else {
+        None
+    };
+    let solved = sealed.as_ref().map_or(solved, |(p, _)| p);
     let solution = match (kind, options.direct_light) {
         (SolverKind::Dense, false) => dense::solve_dense(solved, options, progress),
         (SolverKind::Hierarchical, false) => {
@@ -145,6 +153,9 @@ pub fn run(
             model.closed_dark_objects = turned.objects;
             model.turned_outward_patches = turned.turned;
         }
+    }
+    if let (Some((_, count)), Some(model)) = (&sealed, solution.stats.model.as_mut()) {
+        model.sealed_patches = *count;
     }
     if let Some(cavities) = &cavities {
         cavities.fill(&mut solution, patches_in);
