@@ -851,11 +851,11 @@ fn near_links_into_ancestors(
 /// Most memory the Anderson history may take; above it the solver extrapolates the tail
 /// instead, unless the first sweep finds rows deep enough to damp its antiradiance
 /// ([`crate::solve::health::DAMP_ROW_SUM`]): such a solve takes the history after that sweep,
-/// within the memory limit. The damped sweeps of an office whose binders stand in rows (its
-/// largest row sum 22.2, a 547 MB history) amplified a mode by about 1.1 per sweep and failed
-/// at sweep 43; mixed, it converges in 38 (docs/stability.md). Well-meshed scenes of a million
-/// triangles, whose rows are shallow, converge without it (8 to 10 sweeps) and keep their
-/// memory.
+/// within the memory limit. The damped sweeps of an office converted from MGF (26,932
+/// triangles, its largest row sum 22.2, a 547 MB history) amplified a mode by about 1.14 per
+/// sweep and failed at sweep 43; mixed, it converges (docs/stability.md). Well-meshed scenes of
+/// a million triangles, whose rows are shallow, converge without it (8 to 10 sweeps) and keep
+/// their memory.
 const ACCELERATION_BUDGET_BYTES: u64 = 512 << 20;
 
 /// Sweeps after which a solve still going builds the pair cache it was built without (its
