@@ -42,13 +42,20 @@ pub const SEALED_RAYS: usize = 64;
 /// 64 left 0.3% (2.8%, -0.2%).
 pub const DIRECT_RAYS: usize = 64;
 
+/// Shadow rays per candidate of the first pass, which finds most lit fronts; the others take
+/// [`DIRECT_RAYS`] more once their cosine rays have not found them lit.
+pub const FIRST_RAYS: usize = 4;
+
 /// Rays the test may cast in all, beyond the first shadow ray of each candidate (which lights
 /// most of a lit scene): the cosine rays per candidate are this spread over the candidates,
 /// at most [`SEALED_RAYS`] and at least 16.
 pub const SEALED_RAY_BUDGET: usize = 4_000_000;
 
-/// Seed of the per-patch ray streams.
+/// Seed of the per-patch ray streams of the first pass.
 const SEED: u64 = 0x5eed_5ea1_ed00_0001;
+
+/// Seed of the per-patch ray streams of the second pass.
+const SECOND_SEED: u64 = 0x5eed_5ea1_ed00_0002;
 
 /// How many of `rays` cosine rays may meet lit fronts with the front still sealed: a
 /// sixteenth of them.
@@ -105,24 +112,35 @@ pub fn sealed_fronts(patches: &Patches) -> Vec<bool> {
         .lights
         .iter()
         .any(|l| matches!(l, Light::Sky { .. }));
+    let rng_of = |p: usize| Rng::new(SEED, p as u64);
+    // 1. Most lit fronts see a light at their first shadow rays.
+    let first: Vec<bool> = (0..n)
+        .into_par_iter()
+        .map(|p| {
+            candidate[p]
+                && (lit_by_analytic(patches, &rays, p)
+                    || emitters.seen_from(patches, &rays, p, &mut rng_of(p), FIRST_RAYS))
+        })
+        .collect();
+    // 2. The others cast their cosine rays (a front that sees more than `allowed` of those
+    //    already lit is lit, and stops), then the rest of their shadow rays.
     let seen: Vec<Option<Seen>> = (0..n)
         .into_par_iter()
         .map(|p| {
             if !candidate[p] {
                 return None;
             }
-            let mut rng = Rng::new(SEED, p as u64);
-            let direct = lit_by_analytic(patches, &rays, p)
-                || emitters.seen_from(patches, &rays, p, &mut rng);
             let mut seen = Seen {
-                direct,
+                direct: first[p],
                 fronts: Vec::new(),
             };
+            let mut rng = Rng::new(SECOND_SEED, p as u64);
             let (tri, normal) = (&patches.corners[p], patches.normal[p]);
             let cell = 1.0 / k as f64;
+            let mut lit_fronts = 0;
             for i in 0..k * k {
                 if seen.direct {
-                    break;
+                    return Some(seen);
                 }
                 let (a, b) = ((i % k) as f64, (i / k) as f64);
                 let x = point_on_triangle(
@@ -139,11 +157,15 @@ pub fn sealed_fronts(patches: &Patches) -> Vec<bool> {
                         if patches.is_two_sided(q) || (front && bright(q)) {
                             seen.direct = true;
                         } else if front && candidate[q] {
+                            lit_fronts += usize::from(first[q]);
+                            seen.direct = lit_fronts > allowed;
                             seen.fronts.push(q as u32);
                         }
                     }
                 }
             }
+            seen.direct =
+                seen.direct || emitters.seen_from(patches, &rays, p, &mut rng, DIRECT_RAYS);
             Some(seen)
         })
         .collect();
@@ -206,14 +228,21 @@ impl Emitters {
         Emitters { patch, cdf }
     }
 
-    /// True when one of [`DIRECT_RAYS`] shadow rays from points on patch `p`'s front to points
-    /// on emitters (chosen by power) arrives at an emitting face.
-    fn seen_from(&self, patches: &Patches, rays: &RayScene, p: usize, rng: &mut Rng) -> bool {
+    /// True when one of `count` shadow rays from points on patch `p`'s front to points on
+    /// emitters (chosen by power, stratified) arrives at an emitting face.
+    fn seen_from(
+        &self,
+        patches: &Patches,
+        rays: &RayScene,
+        p: usize,
+        rng: &mut Rng,
+        count: usize,
+    ) -> bool {
         if self.cdf.is_empty() {
             return false;
         }
-        (0..DIRECT_RAYS).any(|i| {
-            let u = (i as f64 + rng.next_f64()) / DIRECT_RAYS as f64;
+        (0..count).any(|i| {
+            let u = (i as f64 + rng.next_f64()) / count as f64;
             let e = self.patch[self
                 .cdf
                 .partition_point(|&c| c < u)
