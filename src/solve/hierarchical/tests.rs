@@ -224,32 +224,42 @@ fn stacked_plates(plates: usize) -> crate::mesh::Patches {
     build_patches(&b.build(), None)
 }
 
+/// The stacked plates with 8 plates (their floor's rows above
+/// [`crate::solve::health::DAMP_ROW_SUM`]) and with 1 (below it), each prepared by `prepare`
+/// and solved for `sweeps` sweeps without direct light: (deep, the model, the solution).
+fn deep_and_shallow_plates(
+    sweeps: usize,
+    prepare: impl Fn(&crate::mesh::Patches, SolverOptions) -> Prepared,
+) -> Vec<(bool, Prepared, crate::solve::solution::Solution)> {
+    [(8, true), (1, false)]
+        .into_iter()
+        .map(|(plates, deep)| {
+            let patches = stacked_plates(plates);
+            let options = SolverOptions {
+                max_iterations: sweeps,
+                direct_light: false,
+                ..SolverOptions::default()
+            };
+            let mut prepared = prepare(&patches, options);
+            let (solution, _) = prepared.solve(&patches, &Progress::hidden());
+            let rows = solution.stats.max_row_sum;
+            assert_eq!(
+                rows > crate::solve::health::DAMP_ROW_SUM,
+                deep,
+                "{plates} plates: rows {rows}"
+            );
+            (deep, prepared, solution)
+        })
+        .collect()
+}
+
 /// A solve whose first sweep's rows damp its antiradiance from the second
 /// ([`crate::solve::health::DAMP_ROW_SUM`]) builds the pair cache it was built without right
 /// after that sweep; one whose rows do not, does not.
 #[test]
 fn a_solve_with_deep_rows_builds_its_pair_cache_after_its_first_sweep() {
-    let hidden = Progress::hidden();
-    for (plates, deep) in [(8, true), (1, false)] {
-        let patches = stacked_plates(plates);
-        let options = SolverOptions {
-            max_iterations: 1,
-            direct_light: false,
-            ..SolverOptions::default()
-        };
-        let mut prepared = late_cache_allowed(&patches, options);
-        let (solution, _) = prepared.solve(&patches, &hidden);
-        let rows = solution.stats.max_row_sum;
-        assert_eq!(
-            rows > crate::solve::health::DAMP_ROW_SUM,
-            deep,
-            "{plates} plates: rows {rows}"
-        );
-        assert_eq!(
-            prepared.pairs.is_some(),
-            deep,
-            "{plates} plates: rows {rows}"
-        );
+    for (deep, prepared, _) in deep_and_shallow_plates(1, late_cache_allowed) {
+        assert_eq!(prepared.pairs.is_some(), deep, "deep rows: {deep}");
     }
 }
 
@@ -258,33 +268,23 @@ fn a_solve_with_deep_rows_builds_its_pair_cache_after_its_first_sweep() {
 /// here 0); one whose rows do not, extrapolates.
 #[test]
 fn a_solve_with_deep_rows_takes_its_anderson_history_over_its_own_budget() {
-    let hidden = Progress::hidden();
-    for (plates, deep) in [(8, true), (1, false)] {
-        let patches = stacked_plates(plates);
-        let options = SolverOptions {
-            max_iterations: 3,
-            direct_light: false,
-            ..SolverOptions::default()
-        };
-        let mut prepared = match Prepared::new(&patches, &options, false) {
+    let no_budget = |patches: &crate::mesh::Patches, options: SolverOptions| {
+        let mut prepared = match Prepared::new(patches, &options, false) {
             Ok(prepared) => prepared,
             Err(e) => panic!("the model does not fit: {e}"),
         };
         prepared.acceleration_budget = 0;
-        let (solution, _) = prepared.solve(&patches, &hidden);
-        let (rows, acceleration) = (solution.stats.max_row_sum, &solution.stats.acceleration);
-        assert_eq!(
-            rows > crate::solve::health::DAMP_ROW_SUM,
-            deep,
-            "{plates} plates: rows {rows}"
-        );
+        prepared
+    };
+    for (deep, _, solution) in deep_and_shallow_plates(3, no_budget) {
+        let acceleration = &solution.stats.acceleration;
         if deep {
-            assert_eq!(acceleration, "anderson", "{plates} plates: rows {rows}");
+            assert_eq!(acceleration, "anderson");
         } else {
             assert!(
                 acceleration.starts_with("extrapolation (Anderson history of")
                     && acceleration.ends_with("over its 0 MB budget)"),
-                "{plates} plates: {acceleration}"
+                "{acceleration}"
             );
         }
     }
