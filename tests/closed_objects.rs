@@ -238,3 +238,38 @@ fn a_slab_open_to_the_light_is_not_sealed() {
         .count();
     assert!(lit >= 8, "{lit} of the slab's faces lit");
 }
+
+/// The same slab two-sided: each face's inside is sealed and its outside lit, so it is solved
+/// one-sided facing out (the slab turned around, as the box above): its outside has that
+/// slab's radiance, its inside 0, and the rest of the scene that slab's result.
+#[test]
+fn a_two_sided_slab_is_dark_inside_and_lit_outside() {
+    let (inward, first) = scene_with_slab(false);
+    let mut two = inward.clone();
+    two.two_sided = (0..two.len()).map(|t| t >= first).collect();
+    let mut outward = inward.clone();
+    for t in &mut outward.triangles[first..] {
+        t.swap(1, 2);
+    }
+    let (expected, got) = (solve(&outward), solve(&two));
+    assert_eq!(got.triangle_radiance_back.len(), two.len());
+    for t in 0..two.len() {
+        let want = expected.triangle_radiance[t];
+        let (outside, inside) = if t >= first {
+            (got.triangle_radiance_back[t], got.triangle_radiance[t])
+        } else {
+            (got.triangle_radiance[t], [0.0; 3])
+        };
+        for c in 0..3 {
+            assert!(
+                (outside[c] - want[c]).abs() <= 1e-9 * (1.0 + want[c].abs()),
+                "triangle {t}: outside {outside:?}, expected {want:?}"
+            );
+        }
+        assert_eq!(inside, [0.0; 3], "triangle {t}: the inside is dark");
+    }
+    assert!(
+        (first..two.len()).any(|t| got.triangle_radiance_back[t][0] > 0.0),
+        "the slab's outside is lit"
+    );
+}

@@ -135,6 +135,7 @@ pub fn run(
     } else {
         None
     };
+    let solved_before_sealing = solved;
     let solved = sealed.as_ref().map_or(solved, |(p, _)| p);
     let solution = match (kind, options.direct_light) {
         (SolverKind::Dense, false) => dense::solve_dense(solved, options, progress),
@@ -147,15 +148,25 @@ pub fn run(
         }
     };
     let mut solution = solution?;
+    // Inner first: the sealed faces were decided on the patches turned outward.
+    if let Some((_, what)) = &sealed {
+        solution.restore_outward(
+            &crate::mesh::closed::Outward {
+                turned_two_sided: what.turned_two_sided.clone(),
+                ..Default::default()
+            },
+            solved_before_sealing,
+        );
+        if let Some(model) = solution.stats.model.as_mut() {
+            model.sealed_patches = what.faces;
+        }
+    }
     if let Some((_, turned)) = &outward {
         solution.restore_outward(turned, patches);
         if let Some(model) = solution.stats.model.as_mut() {
             model.closed_dark_objects = turned.objects;
             model.turned_outward_patches = turned.turned;
         }
-    }
-    if let (Some((_, count)), Some(model)) = (&sealed, solution.stats.model.as_mut()) {
-        model.sealed_patches = *count;
     }
     if let Some(cavities) = &cavities {
         cavities.fill(&mut solution, patches_in);

@@ -29,6 +29,12 @@
 //! alternated with the build without it; in one pass of 64 shadow rays first, 0.653 against
 //! 0.623 s).
 
+//! Faces are tested, not patches: a two-sided patch's front and back each (the faces inside
+//! a slab given two-sided, as MGF scenes are, look into it while their backs face the room).
+//! A two-sided patch with one sealed face is solved one-sided with its lit face as its front
+//! (turned around when that is its back), as `mesh/closed.rs` solves a two-sided closed
+//! object, and reports 0 on the sealed face.
+//!
 //! Only [`crate::solve::run`] does this (the `solve` command, [`crate::solve()`]), as it turns
 //! closed objects outward; the relighter, whose emission changes, solves the surfaces as given.
 
@@ -72,44 +78,96 @@ pub fn lit_rays_allowed(rays: usize) -> usize {
     rays / 16
 }
 
-/// These patches with every sealed front black (albedo 0), and how many; `None` when no front
-/// is sealed.
-pub fn blackened(patches: &Patches) -> Option<(Patches, u64)> {
-    let sealed = sealed_fronts(patches);
-    let count = sealed.iter().filter(|&&s| s).count() as u64;
-    (count > 0).then(|| {
-        let mut black = patches.clone();
-        for (albedo, _) in black.albedo.iter_mut().zip(&sealed).filter(|(_, &s)| s) {
-            *albedo = [0.0; 3];
-        }
-        (black, count)
-    })
+/// What [`blackened`] changed: the sealed faces, and the two-sided patches turned around.
+#[derive(Clone, Debug, Default)]
+pub struct Sealed {
+    /// Faces sealed: fronts of one-sided patches, either face of two-sided ones.
+    pub faces: u64,
+    /// Two-sided patches whose front was sealed and back lit: solved turned around, one-sided,
+    /// so that their solved front is their back face (`Solution::restore_outward` gives each
+    /// its two faces back).
+    pub turned_two_sided: Vec<u32>,
 }
 
-/// What one candidate's rays found: light itself (`direct`), or the candidates whose fronts
-/// its cosine rays met (once per ray).
+/// These patches with every sealed face solved dark, and what changed; `None` when no face is
+/// sealed. A one-sided patch with a sealed front is made black (albedo 0). A two-sided patch
+/// with one sealed face becomes one-sided, its lit face its front (turned around when that is
+/// its back); with both sealed, one-sided and black.
+pub fn blackened(patches: &Patches) -> Option<(Patches, Sealed)> {
+    let (front, back) = sealed_faces(patches);
+    let faces = front.iter().chain(&back).filter(|&&s| s).count() as u64;
+    if faces == 0 {
+        return None;
+    }
+    let mut out = patches.clone();
+    let mut turned_two_sided = Vec::new();
+    for p in 0..patches.len() {
+        let two_sided = patches.is_two_sided(p);
+        match (front[p], two_sided && back[p]) {
+            (false, false) => continue,
+            (true, false) if two_sided => {
+                out.turn_around(p);
+                turned_two_sided.push(p as u32);
+            }
+            (false, true) => {}
+            _ => out.albedo[p] = [0.0; 3],
+        }
+        if two_sided {
+            out.two_sided[p] = false;
+        }
+    }
+    out.forget_two_sided_if_none();
+    Some((
+        out,
+        Sealed {
+            faces,
+            turned_two_sided,
+        },
+    ))
+}
+
+/// What one candidate face's rays found: light itself (`direct`), or the candidate faces its
+/// cosine rays met (once per ray).
 struct Seen {
     direct: bool,
-    fronts: Vec<u32>,
+    faces: Vec<u32>,
 }
 
 /// Per patch: its front is sealed (see the module). All false when no patch is.
 pub fn sealed_fronts(patches: &Patches) -> Vec<bool> {
+    sealed_faces(patches).0
+}
+
+/// Per patch: its front is sealed, and (two-sided patches only) its back is. Face `f` of the
+/// test is patch `f`'s front below `patches.len()`, patch `f - patches.len()`'s back above.
+pub fn sealed_faces(patches: &Patches) -> (Vec<bool>, Vec<bool>) {
     let n = patches.len();
-    let bright = |p: usize| {
-        patches.is_emitter(p)
-            || patches.is_two_sided(p)
-            || patches
-                .source
-                .get(p)
-                .is_some_and(|s| s.iter().any(|&x| x > 0.0))
+    let patch = |f: usize| f % n;
+    let is_back = |f: usize| f >= n;
+    let exists =
+        |f: usize| patches.active[patch(f)] && (!is_back(f) || patches.is_two_sided(patch(f)));
+    let normal = |f: usize| {
+        if is_back(f) {
+            -patches.normal[patch(f)]
+        } else {
+            patches.normal[patch(f)]
+        }
     };
-    let candidate: Vec<bool> = (0..n)
-        .map(|p| patches.active[p] && !bright(p) && patches.albedo[p].iter().any(|&a| a > 0.0))
+    let bright = |f: usize| {
+        let p = patch(f);
+        let source = if is_back(f) {
+            &patches.source_back
+        } else {
+            &patches.source
+        };
+        patches.is_emitter(p) || source.get(p).is_some_and(|s| s.iter().any(|&x| x > 0.0))
+    };
+    let candidate: Vec<bool> = (0..2 * n)
+        .map(|f| exists(f) && !bright(f) && patches.albedo[patch(f)].iter().any(|&a| a > 0.0))
         .collect();
     let candidates = candidate.iter().filter(|&&c| c).count();
     if candidates == 0 {
-        return vec![false; n];
+        return (vec![false; n], vec![false; n]);
     }
     let k = (SEALED_RAY_BUDGET / candidates)
         .clamp(16, SEALED_RAYS)
@@ -121,32 +179,39 @@ pub fn sealed_fronts(patches: &Patches) -> Vec<bool> {
         .lights
         .iter()
         .any(|l| matches!(l, Light::Sky { .. }));
-    let rng_of = |p: usize| Rng::new(SEED, p as u64);
-    // 1. Most lit fronts see a light at their first shadow rays.
-    let first: Vec<bool> = (0..n)
+    let rng_of = |f: usize| Rng::new(SEED, f as u64);
+    // 1. Most lit faces see a light at their first shadow rays.
+    let first: Vec<bool> = (0..2 * n)
         .into_par_iter()
-        .map(|p| {
-            candidate[p]
-                && (lit_by_analytic(patches, &rays, p)
-                    || emitters.seen_from(patches, &rays, p, &mut rng_of(p), FIRST_RAYS))
+        .map(|f| {
+            candidate[f]
+                && (lit_by_analytic(patches, &rays, patch(f), normal(f))
+                    || emitters.seen_from(
+                        patches,
+                        &rays,
+                        (patch(f), normal(f)),
+                        &mut rng_of(f),
+                        FIRST_RAYS,
+                    ))
         })
         .collect();
-    // 2. The others cast their cosine rays (a front that sees more than `allowed` of those
+    // 2. The others cast their cosine rays (a face that sees more than `allowed` of those
     //    already lit is lit, and stops), then the rest of their shadow rays.
-    let seen: Vec<Option<Seen>> = (0..n)
+    let seen: Vec<Option<Seen>> = (0..2 * n)
         .into_par_iter()
-        .map(|p| {
-            if !candidate[p] {
+        .map(|f| {
+            if !candidate[f] {
                 return None;
             }
             let mut seen = Seen {
-                direct: first[p],
-                fronts: Vec::new(),
+                direct: first[f],
+                faces: Vec::new(),
             };
-            let mut rng = Rng::new(SECOND_SEED, p as u64);
-            let (tri, normal) = (&patches.corners[p], patches.normal[p]);
+            let mut rng = Rng::new(SECOND_SEED, f as u64);
+            let (p, normal_f) = (patch(f), normal(f));
+            let tri = &patches.corners[p];
             let cell = 1.0 / k as f64;
-            let mut lit_fronts = 0;
+            let mut lit_faces = 0;
             for i in 0..k * k {
                 if seen.direct {
                     return Some(seen);
@@ -157,34 +222,38 @@ pub fn sealed_fronts(patches: &Patches) -> Vec<bool> {
                     ((a + rng.next_f64()) * cell).min(1.0),
                     ((b + rng.next_f64()) * cell).min(1.0),
                 );
-                let dir = cosine_direction(normal, rng.next_f64(), rng.next_f64());
+                let dir = cosine_direction(normal_f, rng.next_f64(), rng.next_f64());
                 match rays.closest(x, dir, p) {
                     None => seen.direct = sky,
                     Some(hit) => {
-                        let q = hit.patch;
-                        let front = patches.normal[q].dot(dir) < 0.0;
-                        if patches.is_two_sided(q) || (front && bright(q)) {
+                        // The face of the patch hit that looks back along the ray.
+                        let g = if patches.normal[hit.patch].dot(dir) < 0.0 {
+                            hit.patch
+                        } else {
+                            hit.patch + n
+                        };
+                        if exists(g) && bright(g) {
                             seen.direct = true;
-                        } else if front && candidate[q] {
-                            lit_fronts += usize::from(first[q]);
-                            seen.direct = lit_fronts > allowed;
-                            seen.fronts.push(q as u32);
+                        } else if candidate[g] {
+                            lit_faces += usize::from(first[g]);
+                            seen.direct = lit_faces > allowed;
+                            seen.faces.push(g as u32);
                         }
                     }
                 }
             }
-            seen.direct =
-                seen.direct || emitters.seen_from(patches, &rays, p, &mut rng, DIRECT_RAYS);
+            seen.direct = seen.direct
+                || emitters.seen_from(patches, &rays, (p, normal_f), &mut rng, DIRECT_RAYS);
             Some(seen)
         })
         .collect();
     // Light spreads from the candidates that see it themselves to every candidate more than
     // `allowed` of whose rays meet a lit one.
-    let mut seen_by: Vec<Vec<u32>> = vec![Vec::new(); n];
-    for (p, s) in seen.iter().enumerate() {
+    let mut seen_by: Vec<Vec<u32>> = vec![Vec::new(); 2 * n];
+    for (f, s) in seen.iter().enumerate() {
         if let Some(s) = s.as_ref().filter(|s| !s.direct) {
-            for &q in &s.fronts {
-                seen_by[q as usize].push(p as u32);
+            for &g in &s.faces {
+                seen_by[g as usize].push(f as u32);
             }
         }
     }
@@ -192,19 +261,23 @@ pub fn sealed_fronts(patches: &Patches) -> Vec<bool> {
         .iter()
         .map(|s| s.as_ref().is_none_or(|s| s.direct))
         .collect();
-    let mut lit_rays = vec![0usize; n];
-    let mut queue: Vec<usize> = (0..n).filter(|&p| candidate[p] && lit[p]).collect();
-    while let Some(q) = queue.pop() {
-        for &p in &seen_by[q] {
-            let p = p as usize;
-            lit_rays[p] += 1;
-            if !lit[p] && lit_rays[p] > allowed {
-                lit[p] = true;
-                queue.push(p);
+    let mut lit_rays = vec![0usize; 2 * n];
+    let mut queue: Vec<usize> = (0..2 * n).filter(|&f| candidate[f] && lit[f]).collect();
+    while let Some(g) = queue.pop() {
+        for &f in &seen_by[g] {
+            let f = f as usize;
+            lit_rays[f] += 1;
+            if !lit[f] && lit_rays[f] > allowed {
+                lit[f] = true;
+                queue.push(f);
             }
         }
     }
-    (0..n).map(|p| candidate[p] && !lit[p]).collect()
+    let sealed = |f: usize| candidate[f] && !lit[f];
+    (
+        (0..n).map(sealed).collect(),
+        (n..2 * n).map(sealed).collect(),
+    )
 }
 
 /// The emitting patches and the cumulative distribution of their power, for shadow rays.
@@ -237,13 +310,14 @@ impl Emitters {
         Emitters { patch, cdf }
     }
 
-    /// True when one of `count` shadow rays from points on patch `p`'s front to points on
-    /// emitters (chosen by power, stratified) arrives at an emitting face.
+    /// True when one of `count` shadow rays from points on patch `p`, leaving its face of
+    /// unit `normal`, to points on emitters (chosen by power, stratified) arrives at an
+    /// emitting face.
     fn seen_from(
         &self,
         patches: &Patches,
         rays: &RayScene,
-        p: usize,
+        (p, normal): (usize, DVec3),
         rng: &mut Rng,
         count: usize,
     ) -> bool {
@@ -264,17 +338,17 @@ impl Emitters {
                 return false;
             }
             let dir = to / dist;
-            patches.normal[p].dot(dir) > 0.0
+            normal.dot(dir) > 0.0
                 && (patches.is_two_sided(e) || patches.normal[e].dot(dir) < 0.0)
                 && rays.visible(x, dir, dist, p, e)
         })
     }
 }
 
-/// True when a point or spot light in front of patch `p` is visible from its centroid, or the
-/// sun reaches its centroid.
-fn lit_by_analytic(patches: &Patches, rays: &RayScene, p: usize) -> bool {
-    let (x, normal) = (patches.centroid[p], patches.normal[p]);
+/// True when a point or spot light in front of patch `p`'s face of unit `normal` is visible
+/// from its centroid, or the sun reaches its centroid through that face.
+fn lit_by_analytic(patches: &Patches, rays: &RayScene, p: usize, normal: DVec3) -> bool {
+    let x = patches.centroid[p];
     patches.lights.iter().any(|light| match *light {
         Light::Point { position, .. } | Light::Spot { position, .. } => {
             let to: DVec3 = position - x;

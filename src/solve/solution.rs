@@ -180,8 +180,8 @@ pub struct ModelStats {
     pub closed_dark_objects: u64,
     /// Their patches that faced inside, solved turned outward and black.
     pub turned_outward_patches: u64,
-    /// One-sided patches whose front the light does not reach, solved black
-    /// ([`crate::solve::sealed`]).
+    /// Faces the light does not reach, solved dark ([`crate::solve::sealed`]): fronts of
+    /// one-sided patches, either face of two-sided ones.
     pub sealed_patches: u64,
     /// Antiradiance values stored per sweep state: (element, bin) slots that some link both
     /// writes and reads.
