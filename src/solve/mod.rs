@@ -123,14 +123,16 @@ pub fn run(
     let patches = opened.as_ref().unwrap_or(patches_in);
     // Closed objects with a dark inside are solved facing out (see `mesh::closed`), when
     // backs exposed to light are blocked (the handling of files as found).
-    let outward = if options.antiradiance && options.block_exposed_backs && !options.two_sided {
+    let as_found = options.antiradiance && options.block_exposed_backs && !options.two_sided;
+    let outward = if as_found {
         patches.closed_objects_outward()
     } else {
         None
     };
     let solved = outward.as_ref().map_or(patches, |(p, _)| p);
-    // One-sided fronts the light does not reach are solved black (see `sealed`).
-    let sealed = if options.antiradiance && options.block_exposed_backs && !options.two_sided {
+    // Faces the light does not reach are solved dark, when backs are handled as found too
+    // (see `sealed`).
+    let sealed = if as_found {
         sealed::blackened(solved)
     } else {
         None

@@ -61,9 +61,9 @@ pub const DIRECT_RAYS: usize = 64;
 /// [`DIRECT_RAYS`] more once their cosine rays have not found them lit.
 pub const FIRST_RAYS: usize = 4;
 
-/// Rays the test may cast in all, beyond the first shadow ray of each candidate (which lights
-/// most of a lit scene): the cosine rays per candidate are this spread over the candidates,
-/// at most [`SEALED_RAYS`] and at least 16.
+/// Cosine rays the test may cast in all: the cosine rays per candidate face are this spread
+/// over the candidates, at most [`SEALED_RAYS`] and at least 16 (the shadow rays are not
+/// counted: the first pass's [`FIRST_RAYS`] light most faces of a lit scene).
 pub const SEALED_RAY_BUDGET: usize = 4_000_000;
 
 /// Seed of the per-patch ray streams of the first pass.

@@ -67,6 +67,7 @@ impl<const C: usize> Scratch<C> {
 /// The state a window of [`crate::solve::convergence::WINDOW_SWEEPS`] sweeps started from
 /// (radiance of the fronts, then of the back faces, f32), for the net change
 /// [`Convergence::record_window`] takes.
+#[derive(Default)]
 struct Window<const C: usize> {
     start: Vec<[f32; C]>,
     sweeps: usize,
@@ -214,10 +215,7 @@ impl Prepared {
 
         // Mixed sweeps also measure their net change over windows of sweeps
         // ([`Convergence::record_window`]).
-        let mut window = anderson.is_some().then(|| Window::<C> {
-            start: Vec::new(),
-            sweeps: 0,
-        });
+        let mut window = anderson.is_some().then(Window::<C>::default);
         let mut last = first - 1;
         let (tol, max_iterations) = (options.tol, options.max_iterations);
         for iteration in first..first + max_iterations {
@@ -271,8 +269,7 @@ impl Prepared {
             if iteration == first
                 && guard.deep_rows()
                 && anderson.is_none()
-                && self.options.acceleration_depth > 0
-                && self.history_bytes(C) > self.acceleration_budget
+                && self.over_own_history_budget(self.history_bytes(C))
             {
                 anderson = self.accelerate::<C>(
                     (None, going_on, true),
@@ -282,10 +279,7 @@ impl Prepared {
                 );
                 if anderson.is_some() {
                     two_back = None;
-                    window = Some(Window::<C> {
-                        start: Vec::new(),
-                        sweeps: 0,
-                    });
+                    window = Some(Window::default());
                 }
             }
             if self.settle_sweep(
@@ -718,7 +712,7 @@ impl Prepared {
         let mb = |bytes: u64| bytes.div_ceil(1 << 20);
         let off = if depth == 0 {
             Some("acceleration_depth 0".to_string())
-        } else if history > self.acceleration_budget && !deep {
+        } else if self.over_own_history_budget(history) && !deep {
             Some(format!(
                 "Anderson history of {} MB over its {} MB budget",
                 mb(history),
@@ -761,6 +755,12 @@ impl Prepared {
         (anderson, acceleration)
     }
 
+    /// True when Anderson mixing is on and a history of `bytes` is over its own budget
+    /// ([`ACCELERATION_BUDGET_BYTES`]), which only a solve with deep rows may exceed.
+    fn over_own_history_budget(&self, bytes: u64) -> bool {
+        self.options.acceleration_depth > 0 && bytes > self.acceleration_budget
+    }
+
     /// Bytes of the Anderson history of a solve in `channels` channels at
     /// [`SolverOptions::acceleration_depth`]: the history itself
     /// ([`Anderson::bytes`]), the two flat copies of the state it mixes (f64 each) and the
@@ -783,7 +783,7 @@ impl Prepared {
     /// over [`ACCELERATION_BUDGET_BYTES`]; see [`Self::acceleration`]).
     pub(super) fn planned_history_bytes(&self, slots: usize, channels: usize) -> u64 {
         let bytes = self.history_bytes_with(slots, channels);
-        if self.options.acceleration_depth > 0 && bytes <= self.acceleration_budget {
+        if self.options.acceleration_depth > 0 && !self.over_own_history_budget(bytes) {
             bytes
         } else {
             0
