@@ -47,6 +47,30 @@ pub fn reset_peak_rss() -> bool {
     }
 }
 
+/// True where [`release_freed`] hands freed memory back (glibc's allocator on Linux).
+pub const RELEASES_FREED: bool = cfg!(all(target_os = "linux", target_env = "gnu"));
+
+/// Hands the memory the allocator holds free back to the system, so that what a finished stage
+/// freed in small blocks (the exact couplings' rows, one small vector per receiver) does not stay
+/// resident beside the next stage's large arrays. With glibc's allocator (`malloc_trim`, which
+/// also releases the free pages inside its heaps); elsewhere it does nothing. Returns true when
+/// some memory was released.
+pub fn release_freed() -> bool {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        extern "C" {
+            fn malloc_trim(pad: usize) -> i32;
+        }
+        // SAFETY: `malloc_trim` only walks the allocator's own free lists (under its locks) and
+        // returns their pages to the kernel; it touches no memory in use.
+        unsafe { malloc_trim(0) != 0 }
+    }
+    #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+    {
+        false
+    }
+}
+
 /// Reads one `Name:  <n> kB` field of `/proc/self/status`, in bytes.
 fn status_field(name: &str) -> Option<u64> {
     #[cfg(target_os = "linux")]

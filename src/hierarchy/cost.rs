@@ -106,10 +106,18 @@ impl HierarchicalCosts {
         // Exact links as held: sender and entry start per link, entries.
         let exact = c.exact_pairs * 8 + entries * entry;
         // The couplings as computed, per receiver (senders, entry counts, entries, in vectors
-        // grown by doubling); once copied into the final arrays they are freed, but the allocator
+        // grown by doubling); once copied into the final arrays they are freed, but an allocator
         // keeps such small blocks resident (measured on the office mesh: 1.04 GB of rows for
         // 0.68 GB of final arrays, and the resident memory stayed up).
         let rows = exact + exact / 2;
+        // What of them stays resident through the sweeps: nothing where the allocator hands
+        // freed blocks back ([`crate::memory::RELEASES_FREED`]: the solver releases them once
+        // the links are built).
+        let rows_kept = if crate::memory::RELEASES_FREED {
+            0
+        } else {
+            rows
+        };
         // Refinement: keys (8 bytes) becoming links, the exact pairs, their rows and the final
         // arrays, receiver geometry.
         let refine = tree
@@ -119,7 +127,7 @@ impl HierarchicalCosts {
             + exact
             + n * (size_of::<PatchGeom>() as u64 + 12)
             + c.nodes * 4;
-        // Sweeps: what the model holds (links, the rows the allocator kept, per-element arrays:
+        // Sweeps: what the model holds (links, the rows an allocator kept, per-element arrays:
         // area, normal, centroid, albedo, patch, element node, live-bin mask and start; groups,
         // live-bin masks, solution) and the solve's state ([`HierarchicalCosts::state_bytes`]).
         let links = c.cluster_links * link + c.nodes * (4 + 16) + exact + n * 4;
@@ -127,7 +135,7 @@ impl HierarchicalCosts {
         let group = groups * 48 + n * 4;
         let held = tree
             + links
-            + rows
+            + rows_kept
             + elements
             + group
             + c.nodes * words * 8

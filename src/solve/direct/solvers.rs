@@ -149,6 +149,9 @@ pub fn solve_hierarchical_direct(
     // point light gets its own.
     crate::mesh::lights::add_into(&mut source, prepared.light_source_of_faces(patches));
     drop(direct);
+    // The per-receiver lists of lights were small blocks: freed, they need not stay resident
+    // through the sweeps.
+    crate::memory::release_freed();
     prepared.timings.direct = t_direct.elapsed().as_secs_f64();
     let (reflected, state) = prepared.solve_with_source(patches, &source, None, progress);
     let elements = prepared.kept_elements(patches, state.radiance(), true);

@@ -138,6 +138,9 @@ impl Prepared {
                 Err(over) => over,
             };
             discarded_seconds += t_attempt.elapsed().as_secs_f64();
+            // What the refused attempt freed in small blocks goes back to the system before the
+            // next one is measured against what the process holds.
+            crate::memory::release_freed();
             if over.solve_bytes_per_element > 0 {
                 reserve_per_element = (over.solve_bytes_per_element as f64 * RESERVE_SHARE) as u64;
             }
@@ -236,6 +239,7 @@ impl Prepared {
             }
         };
         let t2 = Instant::now();
+        crate::memory::release_freed();
         debug_assert!(tree.validate().is_ok(), "{:?}", tree.validate());
         let mut prepared = Prepared {
             elem_area: Vec::with_capacity(tree.elements.len()),
@@ -280,6 +284,7 @@ impl Prepared {
             &prepared.elem_back,
         );
         prepared.fields = Fields::build(&mut prepared, options.field_ratio, record_culled);
+        crate::memory::release_freed();
         prepared.work = prepared.count_sweep_work();
         // Model only what the scene needs: grey albedos allow one-channel solves; a convex
         // enclosure needs no antiradiance; each element stores only the bins links use.
