@@ -273,3 +273,45 @@ fn a_two_sided_slab_is_dark_inside_and_lit_outside() {
         "the slab's outside is lit"
     );
 }
+
+/// A wall through the slab: a quad in the plane of the slab's far face (z = 1), facing the
+/// light as that face faces into the slab, from the slab's bottom to 0.8 m above its top. Its
+/// front is lit above the slab, and where it runs through the slab it lies on the slab's face:
+/// rays from inside the slab that meet it there meet no light (as a wall's end face, lit at a
+/// window's reveal, runs through the lintel above the window). The slab stays sealed.
+#[test]
+fn a_slab_a_lit_wall_runs_through_is_dark_inside() {
+    let (mut scene, first) = scene_with_slab(false);
+    let slab = first..scene.len();
+    let base = scene.positions.len() as u32;
+    for (x, y) in [(0.6, 0.1), (1.0, 0.1), (1.0, 1.3), (0.6, 1.3)] {
+        scene.positions.push(DVec3::new(x, y, 1.0));
+    }
+    // Counter-clockwise seen from -z: the front faces the light (z < 1).
+    for t in [[0, 3, 2], [0, 2, 1]] {
+        scene.triangles.push(t.map(|k| base + k));
+        scene.albedo.push([0.5; 3]);
+        scene.emission.push([0.0; 3]);
+        scene.material.push(None);
+    }
+    let wall = slab.end..scene.len();
+    let patches = build_patches(&scene, None);
+    for t in wall.clone() {
+        assert!(patches.normal[t].z < -0.99, "the wall faces -z: {t}");
+    }
+    let sealed = sealed_fronts(&patches);
+    assert!(
+        wall.clone().all(|t| !sealed[t]),
+        "the wall is lit: {:?}",
+        &sealed[wall]
+    );
+    assert!(
+        slab.clone().all(|t| sealed[t]),
+        "{:?}",
+        &sealed[slab.clone()]
+    );
+    let got = solve(&scene);
+    for t in slab {
+        assert_eq!(got.triangle_radiance[t], [0.0; 3], "triangle {t}");
+    }
+}
