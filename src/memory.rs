@@ -1,5 +1,6 @@
 //! Process memory figures for reports and the memory budget: peak and current resident set
-//! size, and the machine's physical memory.
+//! size, and the machine's physical memory; and [`release_freed`], which hands memory freed in
+//! small blocks back to the system between the solver's stages.
 //!
 //! On Linux they come from `/proc/self/status` (`VmHWM` is the peak resident set size, `VmRSS`
 //! the current one) and `/proc/meminfo` (`MemTotal`). Elsewhere every function returns `None` /

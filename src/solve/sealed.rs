@@ -283,19 +283,26 @@ pub fn sealed_faces(patches: &Patches) -> (Vec<bool>, Vec<bool>) {
                 return Vec::new();
             };
             let mut rng = Rng::new(THIRD_SEED, f as u64);
-            (s.faces.iter())
-                .map(|&(g, point, q)| {
-                    let sees = by_light[g as usize]
-                        && emitters.seen_from_point(
-                            patches,
-                            &rays,
-                            (point, normal(g as usize), q as usize),
-                            &mut rng,
-                            FIRST_RAYS,
-                        );
-                    (g, sees)
-                })
-                .collect()
+            // Once more than `allowed` points seen count, the face is lit whatever the rest
+            // are (those faces are lit from the start of 4.): the rest are not checked.
+            let mut counted = s.lit_rays;
+            let mut hits = Vec::with_capacity(s.faces.len());
+            for &(g, point, q) in &s.faces {
+                if counted > allowed {
+                    break;
+                }
+                let sees = by_light[g as usize]
+                    && emitters.seen_from_point(
+                        patches,
+                        &rays,
+                        (point, normal(g as usize), q as usize),
+                        &mut rng,
+                        FIRST_RAYS,
+                    );
+                counted += usize::from(sees);
+                hits.push((g, sees));
+            }
+            hits
         })
         .collect();
     // 4. Light spreads from the candidates lit to every candidate more than `allowed` of whose
