@@ -316,9 +316,10 @@ fn a_slab_a_lit_wall_runs_through_is_dark_inside() {
     }
 }
 
-/// A plate facing down 0.5 m over a floor, lit by a point light above it or by a sky: the
-/// plate's underside sees only the floor, which the light reaches around the plate's shadow.
-/// Lit through what it sees, it is not sealed (the floor's points it meets see the light).
+/// A plate facing down 0.5 m over a floor, lit by a point light above it or by a sky, with no
+/// emitting triangle: the plate's underside sees only the floor, which the light reaches
+/// around the plate's shadow. The floor's direct light from the analytic light is a source,
+/// so the underside's rays that meet the floor meet light: it is not sealed, and is lit.
 #[test]
 fn a_face_lit_by_what_analytic_lights_light_is_not_sealed() {
     use antiradiance::scene::lights::Light;
@@ -327,9 +328,7 @@ fn a_face_lit_by_what_analytic_lights_light_is_not_sealed() {
             position: DVec3::new(0.0, 1.0, 0.0),
             intensity: [1.0; 3],
         },
-        Light::Sky {
-            radiance: [1.0; 3],
-        },
+        Light::Sky { radiance: [1.0; 3] },
     ] {
         let mut scene = occluder_scene();
         // Drop the emitting square (triangles 0 and 1): the analytic light alone lights it.
@@ -343,11 +342,14 @@ fn a_face_lit_by_what_analytic_lights_light_is_not_sealed() {
         for t in &mut scene.triangles[..2] {
             t.swap(1, 2);
         }
-        scene.lights.push(light.clone());
+        scene.lights.push(light);
         let patches = build_patches(&scene, None);
         assert!(patches.normal[0].y < -0.99, "the plate faces down");
         let sealed = sealed_fronts(&patches);
-        assert!(!sealed[0] && !sealed[1], "{light:?}: the plate's underside is lit");
+        assert!(
+            !sealed[0] && !sealed[1],
+            "{light:?}: the plate's underside is lit"
+        );
         let got = solve(&scene);
         assert!(
             got.triangle_radiance[0][0] > 0.0 && got.triangle_radiance[1][0] > 0.0,
