@@ -1,5 +1,6 @@
-//! Seeded random streams and the sampling maps shared by the path tracer and the exact direct
-//! light: uniform points on triangles, cosine-weighted directions.
+//! Seeded random streams and the sampling maps shared by the path tracer, the exact direct
+//! light and the sealed-face test: uniform points on triangles, cosine-weighted directions,
+//! choices by weight.
 
 use std::f64::consts::PI;
 
@@ -72,6 +73,28 @@ pub fn cosine_direction(n: DVec3, u1: f64, u2: f64) -> DVec3 {
     let phi = 2.0 * PI * u2;
     let z = (1.0 - u1).max(0.0).sqrt();
     (t * (r * phi.cos()) + s * (r * phi.sin()) + n * z).normalize_or_zero()
+}
+
+/// The cumulative distribution of `weights` (not all 0, finite), the last entry exactly 1.
+pub fn cumulative(weights: impl Iterator<Item = f64>) -> Vec<f64> {
+    let weights: Vec<f64> = weights.collect();
+    let total: f64 = weights.iter().sum();
+    let mut cdf: Vec<f64> = weights
+        .iter()
+        .scan(0.0, |acc, w| {
+            *acc += w / total;
+            Some(*acc)
+        })
+        .collect();
+    if let Some(last) = cdf.last_mut() {
+        *last = 1.0;
+    }
+    cdf
+}
+
+/// The entry of `cdf` (from [`cumulative`]) whose interval holds `u` in [0, 1).
+pub fn interval_of(cdf: &[f64], u: f64) -> usize {
+    cdf.partition_point(|&c| c <= u).min(cdf.len() - 1)
 }
 
 #[cfg(test)]

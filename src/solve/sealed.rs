@@ -50,7 +50,9 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::geometry::raytrace::RayScene;
-use crate::geometry::sampling::{cosine_direction, point_on_triangle, Rng};
+use crate::geometry::sampling::{
+    cosine_direction, cumulative, interval_of, point_on_triangle, Rng,
+};
 use crate::mesh::Patches;
 use crate::scene::lights::Light;
 
@@ -360,13 +362,7 @@ impl Emitters {
             .collect();
         let total: f64 = power.iter().sum();
         let cdf = if total > 0.0 && total.is_finite() {
-            power
-                .iter()
-                .scan(0.0, |acc, w| {
-                    *acc += w / total;
-                    Some(*acc)
-                })
-                .collect()
+            cumulative(power.into_iter())
         } else {
             Vec::new()
         };
@@ -417,23 +413,18 @@ impl Emitters {
         rng: &mut Rng,
         (i, count): (usize, usize),
     ) -> bool {
-        {
-            let u = (i as f64 + rng.next_f64()) / count as f64;
-            let e = self.patch[self
-                .cdf
-                .partition_point(|&c| c < u)
-                .min(self.patch.len() - 1)];
-            let y = point_on_triangle(&patches.corners[e], rng.next_f64(), rng.next_f64());
-            let to = y - x;
-            let dist = to.length();
-            if !(dist > 0.0 && dist.is_finite()) {
-                return false;
-            }
-            let dir = to / dist;
-            normal.dot(dir) > 0.0
-                && (patches.is_two_sided(e) || patches.normal[e].dot(dir) < 0.0)
-                && rays.visible(x, dir, dist, p, e)
+        let u = (i as f64 + rng.next_f64()) / count as f64;
+        let e = self.patch[interval_of(&self.cdf, u)];
+        let y = point_on_triangle(&patches.corners[e], rng.next_f64(), rng.next_f64());
+        let to = y - x;
+        let dist = to.length();
+        if !(dist > 0.0 && dist.is_finite()) {
+            return false;
         }
+        let dir = to / dist;
+        normal.dot(dir) > 0.0
+            && (patches.is_two_sided(e) || patches.normal[e].dot(dir) < 0.0)
+            && rays.visible(x, dir, dist, p, e)
     }
 }
 

@@ -55,7 +55,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::geometry::raytrace::RayScene;
-use crate::geometry::sampling::{point_on_triangle, Rng};
+use crate::geometry::sampling::{cumulative, interval_of, point_on_triangle, Rng};
 use crate::geometry::tolerances::GROUP_NORMAL_TOLERANCE;
 use crate::geometry::tolerances::{SAMPLE_BELOW_ONE, TIGHTER};
 use crate::geometry::{self, plane_tol, point_key, Lanes, Tri, LANES, PLANE_EPS};
@@ -181,28 +181,6 @@ fn points_form_factor(corners: &Tri, q: usize, n_x: DVec3, s: &PatchGeom, parts:
         }
     }
     sum.reduce_add()
-}
-
-/// The cumulative distribution of `weights` (not all 0, finite), the last entry exactly 1.
-fn cumulative(weights: impl Iterator<Item = f64>) -> Vec<f64> {
-    let weights: Vec<f64> = weights.collect();
-    let total: f64 = weights.iter().sum();
-    let mut cdf: Vec<f64> = weights
-        .iter()
-        .scan(0.0, |acc, w| {
-            *acc += w / total;
-            Some(*acc)
-        })
-        .collect();
-    if let Some(last) = cdf.last_mut() {
-        *last = 1.0;
-    }
-    cdf
-}
-
-/// The entry of `cdf` (from [`cumulative`]) whose interval holds `u` in [0, 1).
-fn interval_of(cdf: &[f64], u: f64) -> usize {
-    cdf.partition_point(|&c| c <= u).min(cdf.len() - 1)
 }
 
 /// Receiver points per side for an element and an emitter at [`separation`] `ratio`: the rule
