@@ -392,7 +392,7 @@ impl Dense<'_> {
         }
         for (dst, src) in a_out.iter_mut().zip(&a_acc) {
             *dst = if options.antiradiance {
-                src.map(|x| projection.apply(x) as f32)
+                src.map(|x| projection.apply_anti(x, row) as f32)
             } else {
                 [0.0; 3]
             };

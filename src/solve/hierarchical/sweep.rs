@@ -423,7 +423,7 @@ impl SweepContext<'_> {
             }
         }
         for (dst, bin) in a_out.iter_mut().zip(live.bins_of(e)) {
-            *dst = a_acc[bin].map(|x| box_.apply(x) as f32);
+            *dst = a_acc[bin].map(|x| box_.apply_anti(x, row) as f32);
             finite &= a_acc[bin].iter().all(|x| x.is_finite()) && dst.iter().all(|x| x.is_finite());
         }
         num += (0..C)
