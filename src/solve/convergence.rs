@@ -324,6 +324,7 @@ pub fn start_damping(
     }
     match guard.damping() {
         Damping::All => stats.radiance_damped_after = Some(iteration),
+        _ if !guard.floor_open() => stats.floor_closed_after = Some(iteration),
         _ => stats.damped_after = Some(iteration),
     }
     convergence.restart();

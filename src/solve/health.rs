@@ -262,13 +262,13 @@ impl Projection {
 
     /// The projection of a solve with `bound` (`None`: none applies, as for unoccluded
     /// radiosity) whose sweeps are `damped`: onto `0..=bound` once damped (antiradiance at
-    /// shallow rows from `-ANTI_FLOOR_SHARE * bound`), none before.
-    pub fn of(bound: Option<f64>, damped: bool) -> Projection {
+    /// shallow rows from `-ANTI_FLOOR_SHARE * bound` while the floor is `open`), none before.
+    pub fn of(bound: Option<f64>, damped: bool, open: bool) -> Projection {
         match bound {
             Some(b) if damped && b > 0.0 && b.is_finite() => Projection {
                 floor: 0.0,
                 ceiling: b,
-                anti_floor: -ANTI_FLOOR_SHARE * b,
+                anti_floor: if open { -ANTI_FLOOR_SHARE * b } else { 0.0 },
             },
             _ => Projection::NONE,
         }
@@ -443,6 +443,9 @@ pub struct Guard {
     minima: Vec<f64>,
     /// The first sweep's largest row sum was above [`DAMP_ROW_SUM`] ([`Guard::note_rows`]).
     deep_rows: bool,
+    /// Damped antiradiance may still go below 0 at shallow rows ([`ANTI_FLOOR_SHARE`]): true
+    /// until damped sweeps stall with it ([`Guard::wants_damping`]).
+    floor_open: bool,
 }
 
 impl Guard {
@@ -465,6 +468,7 @@ impl Guard {
             since_min: 0,
             minima: Vec::new(),
             deep_rows: false,
+            floor_open: true,
         }
     }
 
@@ -552,7 +556,9 @@ impl Guard {
     /// decays) or has made slow and unsteady progress ([`SLOW_WINDOW`]), or (for the first
     /// stage only) the first sweep's rows were deeper than [`DAMP_ROW_SUM`], and the sweeps are not
     /// yet damped as far as they go: the solver should damp one stage further from now on
-    /// ([`Damping`], [`DAMPING`]). At most twice per solve. The growth record starts again, so a
+    /// ([`Damping`], [`DAMPING`]; damped antiradiance first closes its floor at 0
+    /// everywhere, [`Guard::floor_open`], and only then damps the radiance too). At most three
+    /// times per solve. The growth record starts again, so a
     /// fully damped solve that still grows fails [`GROWTH_SWEEPS`] sweeps later.
     pub fn wants_damping(&mut self) -> bool {
         // Slow and not steady: over the window the minimum fell by less than SLOW_PROGRESS and
@@ -572,6 +578,10 @@ impl Guard {
         // take for a stall.
         let next = match self.damping {
             Damping::Plain if stuck || slow || deep => Damping::Antiradiance,
+            Damping::Antiradiance if stuck && self.floor_open => {
+                self.floor_open = false;
+                Damping::Antiradiance
+            }
             Damping::Antiradiance if stuck => Damping::All,
             _ => return false,
         };
@@ -593,6 +603,14 @@ impl Guard {
     /// What the solve damps now.
     pub fn damping(&self) -> Damping {
         self.damping
+    }
+
+    /// True while damped antiradiance may go below 0 at shallow rows ([`ANTI_FLOOR_SHARE`],
+    /// [`OPEN_FLOOR_ROW`]); false once damped sweeps stalled with it: a stack of surfaces the
+    /// exact rows do not show (coupled by cluster links, as faint pairs are with
+    /// `LinkParams::faint_links`) can oscillate through it, and the floor of 0 holds that.
+    pub fn floor_open(&self) -> bool {
+        self.floor_open
     }
 
     /// The failure of a converged sweep `sweep` that was projected and had to clamp a value
@@ -627,7 +645,7 @@ impl Guard {
 
     /// The projection of the next sweep ([`Projection::of`] this guard's bound, once damped).
     pub fn projection(&self) -> Projection {
-        Projection::of(self.bound, self.damped())
+        Projection::of(self.bound, self.damped(), self.floor_open)
     }
 }
 
@@ -678,10 +696,13 @@ mod tests {
 
     #[test]
     fn projection_engages_once_damped_and_only_with_a_bound() {
-        assert_eq!(Projection::of(Some(4.0), false), Projection::NONE);
-        assert_eq!(Projection::of(None, true), Projection::NONE);
-        assert_eq!(Projection::of(Some(f64::INFINITY), true), Projection::NONE);
-        let p = Projection::of(Some(4.0), true);
+        assert_eq!(Projection::of(Some(4.0), false, true), Projection::NONE);
+        assert_eq!(Projection::of(None, true, true), Projection::NONE);
+        assert_eq!(
+            Projection::of(Some(f64::INFINITY), true, true),
+            Projection::NONE
+        );
+        let p = Projection::of(Some(4.0), true, true);
         assert_eq!((p.apply(-1.0), p.apply(2.5), p.apply(9.0)), (0.0, 2.5, 4.0));
         assert!(p.apply(f64::NAN).is_nan(), "NaN must reach the guard");
         assert_eq!(Projection::NONE.apply(-1e30), -1e30);
@@ -771,7 +792,7 @@ mod tests {
     }
 
     #[test]
-    fn damping_takes_the_antiradiance_first_and_the_radiance_only_after_a_second_stall() {
+    fn damping_takes_the_antiradiance_then_its_floor_then_the_radiance() {
         let mut guard = Guard::new(Some(4.0), 1.0, 1.0);
         let mut sweep = 0;
         let mut feed = |guard: &mut Guard, changes: &[f64]| {
@@ -794,7 +815,11 @@ mod tests {
         ];
         assert!(!feed(&mut guard, &uneven));
         assert_eq!(guard.damping(), Damping::Antiradiance);
-        // A stall of 4 sweeps without a new minimum: the radiance is damped too.
+        // A stall of 4 sweeps without a new minimum: the antiradiance's floor closes at 0.
+        assert!(feed(&mut guard, &[7.6e-3, 7.7e-3, 7.6e-3, 7.8e-3, 7.7e-3]));
+        assert_eq!(guard.damping(), Damping::Antiradiance);
+        assert!(!guard.floor_open());
+        // Another: the radiance is damped too.
         assert!(feed(&mut guard, &[7.6e-3, 7.7e-3, 7.6e-3, 7.8e-3, 7.7e-3]));
         assert_eq!(guard.damping(), Damping::All);
         // Nothing further: a fully damped solve that still grows is left to fail.
@@ -824,6 +849,34 @@ mod tests {
             };
             assert_eq!(guard.damping(), want);
         }
+    }
+
+    /// Damped sweeps that stall with the floor open below 0 close it first (the antiradiance
+    /// then held at 0 everywhere), and only a second stall damps the radiance as well.
+    #[test]
+    fn a_stalled_open_floor_closes_before_the_radiance_is_damped() {
+        let mut guard = Guard::new(Some(4.0), 1.0, 1.0);
+        assert!(guard.sweep(1, 0.5, 0.5, 1.0, true).is_none());
+        guard.note_rows(DAMP_ROW_SUM * 2.0);
+        assert!(guard.wants_damping());
+        let open = guard.projection();
+        assert!(guard.floor_open() && open.apply_anti(-1.0, 1.0) < 0.0);
+        let mut sweep = 2;
+        let mut stall = |guard: &mut Guard| {
+            // The same change sweep after sweep: no new minimum.
+            for _ in 0..=DAMP_AFTER_STALLING {
+                assert!(guard.sweep(sweep, 0.01, 0.01, 1.0, true).is_none());
+                sweep += 1;
+            }
+            guard.wants_damping()
+        };
+        assert!(stall(&mut guard));
+        assert_eq!(guard.damping(), Damping::Antiradiance);
+        assert!(!guard.floor_open());
+        assert_eq!(guard.projection().apply_anti(-1.0, 1.0), 0.0);
+        assert!(stall(&mut guard));
+        assert_eq!(guard.damping(), Damping::All);
+        assert!(!stall(&mut guard), "no stage is left");
     }
 
     #[test]

@@ -47,6 +47,11 @@ pub struct SolveStats {
     /// stalled again ([`crate::solve::health::Damping::All`]); `None` when it did not.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub radiance_damped_after: Option<usize>,
+    /// The sweep after which damped antiradiance was held at 0 everywhere, its damped sweeps
+    /// having stalled with it open below 0 at shallow rows
+    /// ([`crate::solve::health::Guard::floor_open`]); `None` when it was not.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub floor_closed_after: Option<usize>,
     /// Area-weighted mass of negative radiance before clamping, relative to the positive mass:
     /// sum a_p max(0, -B_p,c) / sum a_p max(0, B_p,c), both sums over patches p and RGB
     /// channels c (one ratio, not a mean of per-channel ratios).

@@ -128,6 +128,7 @@ fn resumed<const C: usize>(
     stats.extrapolations = r.extrapolations;
     stats.damped_after = r.damped_after;
     stats.radiance_damped_after = r.radiance_damped_after;
+    stats.floor_closed_after = r.floor_closed_after;
     (r.sweeps + 1, kept)
 }
 
@@ -959,6 +960,7 @@ impl Prepared {
             extrapolations: solution.stats.extrapolations,
             damped_after: solution.stats.damped_after,
             radiance_damped_after: solution.stats.radiance_damped_after,
+            floor_closed_after: solution.stats.floor_closed_after,
         };
         let state = ElementState {
             radiance: radiance_rgb,

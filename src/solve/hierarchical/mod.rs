@@ -163,6 +163,7 @@ struct Resume {
     extrapolations: usize,
     damped_after: Option<usize>,
     radiance_damped_after: Option<usize>,
+    floor_closed_after: Option<usize>,
 }
 
 /// Radiance per element, back faces' radiance per element (empty when none is two-sided) and
