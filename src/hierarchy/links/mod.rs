@@ -80,7 +80,9 @@ pub struct LinkParams {
     /// 2.34% (33.1M -> 6.3M links; one run each). Measured on an earlier build: the generated
     /// classroom 7.1 s, 0.83 GB, 2.26% -> 6.2 s, 0.64 GB, 2.37%; in the `fast` preset
     /// b90_office 38.8 s, 2.25 GB, 5.06% -> 10.5 s, 0.76 GB, 7.66%, the classroom 5.1 s,
-    /// 0.60 GB, 12.8% -> 2.8 s, 0.41 GB, 14.3%, the seed room unchanged (5.44%).
+    /// 0.60 GB, 12.8% -> 2.8 s, 0.41 GB, 14.3%, the seed room unchanged (5.44%). The exact
+    /// rows then miss the near field of small things, so damped antiradiance keeps its floor
+    /// at 0 ([`crate::solve::health::Guard::close_floor`]).
     pub faint_links: bool,
 }
 

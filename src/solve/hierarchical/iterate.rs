@@ -662,7 +662,12 @@ impl Prepared {
         let bound = options
             .antiradiance
             .then(|| health::radiance_bound(source_max, rho_max));
-        let guard = Guard::new(bound, reference_mass, patches.emission_scale);
+        let mut guard = Guard::new(bound, reference_mass, patches.emission_scale);
+        // Faint pairs as cluster links take the near field of small things out of the exact
+        // rows, which then do not show where surfaces stack.
+        if options.faint_links {
+            guard.close_floor();
+        }
         (bound, guard, rho_max)
     }
 
