@@ -9,8 +9,8 @@ writes OUT.obj and OUT.mtl (the MTL beside the OBJ, named after it). What it kee
 - faces (`f`), one-sided in their file order (MGF's front is counter-clockwise, as OBJ's),
   ear-clipped into triangles; `sides 2` is not carried over (solve with `--two-sided` for
   that): files as found are what the solver is measured on;
-- `cyl`, `cone`, `sph` and `ring` tessellated with N divisions a quarter circle (default 5,
-  as MGF's own library), `prism` and `torus` refused;
+- `cyl`, `cone`, `sph`, `ring` and `torus` tessellated with N divisions a quarter circle
+  (default 5, as MGF's own library), `prism` refused;
 - transforms (`xf` blocks and `i FILE xf-args`, with `-t -rx -ry -rz -s -mx -my -mz -a -i`),
   includes relative to the including file;
 - materials: `Kd` from `rd` and its colour (`cxy`, CIE 1931 chromaticity, through Radiance's
@@ -288,7 +288,9 @@ class Converter:
             self.sphere(w[1], float(w[2]))
         elif k == 'ring':
             self.ring(w[1], float(w[2]), float(w[3]))
-        elif k in ('prism', 'torus'):
+        elif k == 'torus':
+            self.torus(w[1], float(w[2]), float(w[3]))
+        elif k == 'prism':
             raise ValueError(f"{k} is not supported")
         # Other entities (rs, td, ts, ir, sides, o, ies, fh, cspec, cct, cmix) carry nothing
         # a diffuse one-sided solve uses.
@@ -356,6 +358,35 @@ class Converter:
                     quad = quad[:3]
                 elif i == nv - 1:
                     quad = [quad[0], quad[1], quad[3]]
+                if inward:
+                    quad = quad[::-1]
+                self.polygon([self.point(p) for p in quad])
+
+    def torus(self, vc, r_min, r_max):
+        # MGF: the tube spans r_min..r_max from the centre in the plane across the centre's
+        # normal; negative radii turn the surface inward.
+        center, normal = self.vertices[vc]
+        inward = r_min < 0 or r_max < 0
+        r_min, r_max = abs(r_min), abs(r_max)
+        ring, tube = (r_min + r_max) / 2, (r_max - r_min) / 2
+        length = math.sqrt(sum(a * a for a in normal))
+        axis = [a / length for a in normal]
+        spine = self.circle(center, axis, ring)
+        n = len(spine)
+        m = 4 * self.divisions
+
+        def at(i, j):
+            # Point j of the tube's cross-section at spine point i.
+            out = [spine[i][c] - center[c] for c in range(3)]
+            norm = math.sqrt(sum(x * x for x in out))
+            out = [x / norm for x in out]
+            a = 2 * math.pi * j / m
+            return [spine[i][c] + tube * (math.cos(a) * out[c] + math.sin(a) * axis[c]) for c in range(3)]
+
+        for i in range(n):
+            for j in range(m):
+                i1, j1 = (i + 1) % n, (j + 1) % m
+                quad = [at(i, j), at(i1, j), at(i1, j1), at(i, j1)]
                 if inward:
                     quad = quad[::-1]
                 self.polygon([self.point(p) for p in quad])
