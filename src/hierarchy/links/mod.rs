@@ -76,8 +76,9 @@ pub struct LinkParams {
     /// couplings between its elements. What is lost is the near field of small things among
     /// themselves (a chair's tessellated seat, a lamp's shade), evaluated from the sender's
     /// centroid. Off by default; on in the `fast` preset. Measured at the default preset:
-    /// b90_office 47.1 s, 3.34 GB, 1.52% from its path-traced reference -> 19.4 s, 1.30 GB,
-    /// 2.34% (33.1M -> 6.3M links; one run each). Measured on an earlier build: the generated
+    /// b90_office 31.4 s, 1.99 GiB, 1.21% (bias -0.34%) from its path-traced reference ->
+    /// 12.0 s, 1.00 GiB, 2.33% (-1.76%) (32.6M -> 8.1M links; one run each). Measured on an
+    /// earlier build: the generated
     /// classroom 7.1 s, 0.83 GB, 2.26% -> 6.2 s, 0.64 GB, 2.37%; in the `fast` preset
     /// b90_office 38.8 s, 2.25 GB, 5.06% -> 10.5 s, 0.76 GB, 7.66%, the classroom 5.1 s,
     /// 0.60 GB, 12.8% -> 2.8 s, 0.41 GB, 14.3%, the seed room unchanged (5.44%). The exact
