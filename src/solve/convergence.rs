@@ -311,20 +311,23 @@ pub fn change_ratio(num: f64, den: f64) -> f64 {
 
 /// After a sweep that did not stop the solve, the same in both solvers: when the health `guard`
 /// asks for damping from now on (the sweeps' change kept growing or stalled), records
-/// `iteration` in `stats.damped_after`, restarts the `convergence` estimate (the iteration
-/// changed) and returns true, so the caller restarts whatever else measured the old iteration.
+/// `iteration` for the step it took (`stats.damped_after`, `floor_closed_after` or
+/// `radiance_damped_after`), restarts the `convergence` estimate (the iteration changed) and
+/// returns true, so the caller restarts whatever else measured the old iteration.
 pub fn start_damping(
     iteration: usize,
     guard: &mut Guard,
     convergence: &mut Convergence,
     stats: &mut SolveStats,
 ) -> bool {
+    // A floor closed before any damping (`Guard::close_floor`) is not a step of this one.
+    let floor_was_open = guard.floor_open();
     if !guard.wants_damping() {
         return false;
     }
     match guard.damping() {
         Damping::All => stats.radiance_damped_after = Some(iteration),
-        _ if !guard.floor_open() => stats.floor_closed_after = Some(iteration),
+        _ if floor_was_open && !guard.floor_open() => stats.floor_closed_after = Some(iteration),
         _ => stats.damped_after = Some(iteration),
     }
     convergence.restart();
@@ -395,6 +398,44 @@ pub fn end_sweep(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Each damping step is recorded as the one it is, also for a guard whose floor was closed
+    /// from the start (faint pairs as cluster links): its first step damps the antiradiance.
+    #[test]
+    fn start_damping_records_each_step() {
+        for closed_from_start in [false, true] {
+            let mut guard = Guard::new(Some(4.0), 1.0, 1.0);
+            if closed_from_start {
+                guard.close_floor();
+            }
+            let (mut convergence, mut stats) = (Convergence::default(), SolveStats::default());
+            assert!(guard.sweep(1, 0.5, 0.5, 1.0, true).is_none());
+            guard.note_rows(crate::solve::health::DAMP_ROW_SUM * 2.0);
+            assert!(start_damping(1, &mut guard, &mut convergence, &mut stats));
+            assert_eq!(stats.damped_after, Some(1), "closed {closed_from_start}");
+            assert_eq!(stats.floor_closed_after, None);
+            let mut sweep = 2;
+            let mut stall = |guard: &mut Guard, stats: &mut SolveStats| loop {
+                assert!(guard.sweep(sweep, 0.01, 0.01, 1.0, true).is_none());
+                sweep += 1;
+                if start_damping(sweep - 1, guard, &mut convergence, stats) {
+                    return sweep - 1;
+                }
+                assert!(sweep < 100, "no damping step");
+            };
+            let next = stall(&mut guard, &mut stats);
+            if closed_from_start {
+                assert_eq!(stats.radiance_damped_after, Some(next));
+                assert_eq!(stats.floor_closed_after, None);
+            } else {
+                assert_eq!(stats.floor_closed_after, Some(next));
+                assert_eq!(stats.radiance_damped_after, None);
+                let last = stall(&mut guard, &mut stats);
+                assert_eq!(stats.radiance_damped_after, Some(last));
+            }
+            assert_eq!(stats.damped_after, Some(1));
+        }
+    }
 
     /// Residuals shrinking by a steady ratio: after three, `sweeps_left` predicts the sweeps
     /// [`Convergence::update`] then takes to stop, within one; with a contraction bound above
