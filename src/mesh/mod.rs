@@ -8,6 +8,7 @@
 
 pub mod closed;
 pub mod lights;
+pub mod overlap;
 
 use glam::DVec3;
 
@@ -92,6 +93,11 @@ pub struct Patches {
     /// `source`; 0 for one-sided patches). Empty when there is no analytic light or no
     /// two-sided patch.
     pub source_back: Vec<[f64; 3]>,
+    /// Per patch, the share of its area that shows where coplanar patches facing the same way
+    /// overlap it ([`overlap::visible_shares`]): what it sends (radiance, antiradiance,
+    /// emission) is weighed by it. Empty when no patch overlaps another (every share 1); see
+    /// [`Patches::visible_share`].
+    pub visible_shares: Vec<f64>,
     /// The ray BVH of these patches, once a ray scene was made of them
     /// ([`crate::geometry::raytrace::RayScene::of`]); clones share it.
     pub ray_cache: crate::geometry::raytrace::RayCache,
@@ -111,6 +117,12 @@ impl Patches {
     /// True when patch `p` is two-sided and active (an inactive patch has no faces to solve).
     pub fn is_two_sided(&self, p: usize) -> bool {
         self.active[p] && self.two_sided.get(p).copied().unwrap_or(false)
+    }
+
+    /// The share of patch `p`'s area that shows (its entry of [`Patches::visible_shares`], 1
+    /// when that list is empty): in (0, 1].
+    pub fn visible_share(&self, p: usize) -> f64 {
+        self.visible_shares.get(p).copied().unwrap_or(1.0)
     }
 
     /// True when patch `p` emits in some channel (its normalized emission is above 0).

@@ -353,10 +353,12 @@ impl Dense<'_> {
         let mut links = 0u64;
         let mut gather = |s: usize, entries: &[Entry]| {
             links += 1;
-            row += gather_entries(
+            // What a patch sends is weighed by the share of it that shows.
+            let w = self.patches.visible_share(s);
+            row += w * gather_entries(
                 entries,
-                radiance[s],
-                |bin| anti[s * nb + bin].map(f64::from),
+                radiance[s].map(|x| w * x),
+                |bin| anti[s * nb + bin].map(|x| w * f64::from(x)),
                 options.antiradiance,
                 params.two_sided || back[s],
                 &mut h,

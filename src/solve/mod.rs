@@ -139,6 +139,10 @@ pub fn run(
     };
     let solved_before_sealing = solved;
     let solved = sealed.as_ref().map_or(solved, |(p, _)| p);
+    // Coplanar patches facing the same way that overlap send by the share of them that shows
+    // (see `mesh::overlap`), decided on the faces as solved.
+    let overlapped = overlapped(solved);
+    let solved = overlapped.as_ref().unwrap_or(solved);
     let solution = match (kind, options.direct_light) {
         (SolverKind::Dense, false) => dense::solve_dense(solved, options, progress),
         (SolverKind::Hierarchical, false) => {
@@ -150,6 +154,9 @@ pub fn run(
         }
     };
     let mut solution = solution?;
+    if let Some(shown) = &overlapped {
+        solution.stats.overlap = Some(solution::OverlapStats::of(shown));
+    }
     // Inner first: the sealed faces were decided on the patches turned outward.
     if let Some((_, what)) = &sealed {
         solution.restore_outward(
@@ -178,4 +185,15 @@ pub fn run(
     // whatever the solver left there.
     solution.settle_inactive(patches_in);
     Ok(solution)
+}
+
+/// `patches` with their visible shares ([`crate::mesh::overlap::visible_shares`]); `None` when
+/// no two of them overlap.
+fn overlapped(patches: &Patches) -> Option<Patches> {
+    let shares = crate::mesh::overlap::visible_shares(patches);
+    (!shares.is_empty()).then(|| {
+        let mut out = patches.clone();
+        out.visible_shares = shares;
+        out
+    })
 }

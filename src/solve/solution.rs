@@ -22,6 +22,33 @@ pub struct DirectStats {
     pub settled_by_pilot: u64,
 }
 
+/// What overlapping coplanar patches facing the same way cost a solve ([`crate::mesh::overlap`]).
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct OverlapStats {
+    /// Patches that another overlaps (visible share below 1).
+    pub patches: u64,
+    /// Their area that does not show, `sum area * (1 - share)`, over the active patches' area:
+    /// the share of the scene's surface given twice.
+    pub hidden_area_share: f64,
+}
+
+impl OverlapStats {
+    /// The figures of `patches` (with their visible shares).
+    pub fn of(patches: &Patches) -> OverlapStats {
+        let (mut hidden, mut total, mut count) = (0.0, 0.0, 0);
+        for p in (0..patches.len()).filter(|&p| patches.active[p]) {
+            let share = patches.visible_share(p);
+            total += patches.area[p];
+            hidden += patches.area[p] * (1.0 - share);
+            count += u64::from(share < 1.0);
+        }
+        OverlapStats {
+            patches: count,
+            hidden_area_share: if total > 0.0 { hidden / total } else { 0.0 },
+        }
+    }
+}
+
 /// Convergence and health figures of one solve.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct SolveStats {
@@ -86,6 +113,10 @@ pub struct SolveStats {
     /// Two-sided emitters just in front of a surface whose gap was solved on its own
     /// ([`crate::solve::cavity`]).
     pub covered_emitters: u64,
+    /// Coplanar patches facing the same way that overlap ([`crate::mesh::overlap`]); `None`
+    /// (left out of the JSON) when none do.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub overlap: Option<OverlapStats>,
     /// Transport links (dense: ordered patch pairs that exchange anything).
     pub links: u64,
     /// Bytes held by the solver's main arrays at their peak.

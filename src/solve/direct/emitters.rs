@@ -48,6 +48,8 @@ impl Emitters {
                 } else {
                     vec![front]
                 };
+                // An emitter under another shows only its visible share.
+                let e = e.map(|x| x * patches.visible_share(p));
                 for geom in faces {
                     emitters.patch.push(p as u32);
                     emitters.geom.push(geom);

@@ -812,7 +812,7 @@ impl Prepared {
     ) -> SweepSums {
         let (live, links, groups) = (&self.live, &self.links, &self.groups);
         let (n, nb, backs) = (self.element_count(), self.bins.len(), self.elem_two.len());
-        let (pairs, elem_area) = (self.pairs.as_ref(), &self.elem_area);
+        let (pairs, send_area) = (self.pairs.as_ref(), self.send_area());
         let ctx = self.sweep_context();
         let Scratch {
             group_b,
@@ -827,7 +827,7 @@ impl Prepared {
             (radiance, radiance_back),
             anti,
             live,
-            elem_area,
+            send_area,
             nb,
             (group_b, group_b_back),
             group_a,

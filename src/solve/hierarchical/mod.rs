@@ -63,6 +63,10 @@ pub struct Prepared {
     elem_center: Vec<DVec3>,
     elem_albedo: Vec<[f64; 3]>,
     elem_patch: Vec<u32>,
+    /// Per element: its area times its patch's visible share ([`Patches::visible_share`]),
+    /// what it sends by; empty when every share is 1 (it is then `elem_area`, see
+    /// [`Prepared::send_area`]).
+    elem_send_area: Vec<f64>,
     /// Per element: it blocks light arriving at its back (two-sided coupling).
     elem_back: Vec<bool>,
     /// Per element: two-sided (its back face has a radiance of its own); empty when no element
@@ -655,6 +659,15 @@ impl Prepared {
         }
     }
 
+    /// Per element, the area it sends by: its area times its patch's visible share.
+    fn send_area(&self) -> &[f64] {
+        if self.elem_send_area.is_empty() {
+            &self.elem_area
+        } else {
+            &self.elem_send_area
+        }
+    }
+
     /// What a sweep reads that does not change between sweeps.
     fn sweep_context(&self) -> SweepContext<'_> {
         SweepContext {
@@ -663,6 +676,7 @@ impl Prepared {
             bins: &self.bins,
             live: &self.live,
             elem_area: &self.elem_area,
+            send_area: self.send_area(),
             elem_normal: &self.elem_normal,
             elem_center: &self.elem_center,
             elem_back: &self.elem_back,

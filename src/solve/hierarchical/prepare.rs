@@ -247,6 +247,7 @@ impl Prepared {
             elem_center: Vec::with_capacity(tree.elements.len()),
             elem_albedo: Vec::with_capacity(tree.elements.len()),
             elem_patch: Vec::with_capacity(tree.elements.len()),
+            elem_send_area: Vec::new(),
             elem_back: Vec::with_capacity(tree.elements.len()),
             elem_two: Vec::new(),
             back_faces: Vec::new(),
@@ -299,6 +300,33 @@ impl Prepared {
         Ok(prepared)
     }
 
+    /// Weighs what each element sends by its patch's visible share
+    /// ([`Patches::visible_share`]): its send area, and the entries of its exact links as
+    /// sender (every entry weighs the sender's radiance or antiradiance).
+    fn weigh_senders(&mut self, patches: &Patches) {
+        let share = |e: usize| patches.visible_share(self.elem_patch[e] as usize);
+        self.elem_send_area = (0..self.elem_area.len())
+            .map(|e| self.elem_area[e] * share(e))
+            .collect();
+        let links = &mut self.links;
+        for l in 0..links.exact_sender.len() {
+            let w = share(links.exact_sender[l] as usize) as f32;
+            if w == 1.0 {
+                continue;
+            }
+            let (start, end) = (
+                links.exact_entry_start[l] as usize,
+                links.exact_entry_start[l + 1] as usize,
+            );
+            for entry in &mut links.exact_entries[start..end] {
+                entry.f_b *= w;
+                entry.f_a *= w;
+                entry.o_b *= w;
+                entry.o_a *= w;
+            }
+        }
+    }
+
     /// Fills the per-element arrays from the finalized tree: area, normal, centroid, albedo,
     /// patch and back blocking, and (`any_two_sided`) which elements have a back face.
     fn fill_elements(&mut self, patches: &Patches, any_two_sided: bool) {
@@ -310,6 +338,9 @@ impl Prepared {
             self.elem_albedo.push(patches.albedo[n.patch as usize]);
             self.elem_patch.push(n.patch);
             self.elem_back.push(n.blocks_back);
+        }
+        if !patches.visible_shares.is_empty() {
+            self.weigh_senders(patches);
         }
         if any_two_sided {
             let tree = &self.tree;

@@ -46,6 +46,8 @@ pub(super) struct SweepContext<'a> {
     pub(super) bins: &'a Bins,
     pub(super) live: &'a LiveBins,
     pub(super) elem_area: &'a [f64],
+    /// Per element, the area it sends by (its area times its patch's visible share).
+    pub(super) send_area: &'a [f64],
     pub(super) elem_normal: &'a [DVec3],
     pub(super) elem_center: &'a [DVec3],
     pub(super) elem_back: &'a [bool],
@@ -211,7 +213,7 @@ impl SweepContext<'_> {
         } else {
             let (e0, e1) = groups.elements[l.sender as usize];
             for e in e0 as usize..e1 as usize {
-                let (a, cos) = (self.elem_area[e], self.elem_normal[e].dot(w));
+                let (a, cos) = (self.send_area[e], self.elem_normal[e].dot(w));
                 pull_term(
                     &mut acc,
                     cos,
