@@ -31,7 +31,10 @@ pub const OVERLAP_MIN_SHARE: f64 = 1e-3;
 const OVERLAP_SAMPLES: usize = 8;
 
 /// Step of the normal components in the plane key (unit normals).
-const NORMAL_STEP: f64 = 0.01;
+const NORMAL_STEP: f64 = 0.05;
+
+/// Shift of the normal components' steps, as a share of a step (see `plane_keys`).
+const NORMAL_SHIFT: f64 = 0.3;
 
 /// Step of the plane offset in the plane key (unit frame, scene diameter 1).
 const OFFSET_STEP: f64 = 1e-3;
@@ -92,9 +95,10 @@ fn share_of(patches: &Patches, p: usize, others: &[u32]) -> f64 {
 }
 
 /// For each patch, the active patches that overlap it coplanar and facing the same way (by at
-/// least [`OVERLAP_MIN_SHARE`] of the smaller one's area).
+/// least [`OVERLAP_MIN_SHARE`] of the smaller one's area). Plane buckets are searched in
+/// parallel; a pair found in two buckets (a patch near a bucket's edge is in both) is kept once.
 fn overlapping_partners(patches: &Patches) -> Vec<Vec<u32>> {
-    let mut partners = vec![Vec::new(); patches.len()];
+    use rayon::prelude::*;
     let mut buckets: HashMap<[i64; 4], Vec<u32>> = HashMap::new();
     for p in 0..patches.len() {
         if !patches.active[p] || patches.area[p] <= 0.0 {
@@ -104,49 +108,53 @@ fn overlapping_partners(patches: &Patches) -> Vec<Vec<u32>> {
             buckets.entry(key).or_default().push(p as u32);
         }
     }
-    let mut seen = std::collections::HashSet::new();
-    for members in buckets.values() {
-        if members.len() < 2 {
-            continue;
-        }
-        for (p, q) in candidate_pairs(patches, members) {
-            let (p, q) = (p.min(q), p.max(q));
-            if seen.contains(&(p, q)) || !overlap(patches, p as usize, q as usize) {
-                continue;
-            }
-            seen.insert((p, q));
-            partners[p as usize].push(q);
-            partners[q as usize].push(p);
-        }
+    let buckets: Vec<Vec<u32>> = buckets.into_values().filter(|m| m.len() > 1).collect();
+    let found: Vec<(u32, u32)> = buckets
+        .par_iter()
+        .flat_map_iter(|members| {
+            candidate_pairs(patches, members)
+                .into_iter()
+                .filter(|&(p, q)| overlap(patches, p as usize, q as usize))
+                .map(|(p, q)| (p.min(q), p.max(q)))
+        })
+        .collect();
+    let mut partners = vec![Vec::new(); patches.len()];
+    for (p, q) in found {
+        partners[p as usize].push(q);
+        partners[q as usize].push(p);
+    }
+    for list in &mut partners {
+        list.sort_unstable();
+        list.dedup();
     }
     partners
 }
 
 /// The plane buckets patch `p` goes in: its normal's components and its plane's offset
 /// quantized, and the neighbouring step too where a value lies within its tolerance of a step's
-/// edge (so that two patches within tolerance of each other share a bucket).
+/// edge (so that two patches within tolerance of each other share a bucket). The normal's steps
+/// are shifted by [`NORMAL_SHIFT`] of a step so that the components of common directions (0,
+/// 1/2, 1/sqrt(3), 1/sqrt(2), sqrt(3)/2, 1) lie well inside a step: an axis-aligned wall
+/// goes in one bucket, not four.
 fn plane_keys(patches: &Patches, p: usize) -> Vec<[i64; 4]> {
     let n = patches.normal[p];
     let offset = n.dot(patches.centroid[p]);
     let size = longest_edge(&patches.corners[p]);
     let values = [
-        (n.x, NORMAL_STEP, GROUP_NORMAL_TOLERANCE),
-        (n.y, NORMAL_STEP, GROUP_NORMAL_TOLERANCE),
-        (n.z, NORMAL_STEP, GROUP_NORMAL_TOLERANCE),
-        (
-            offset,
-            OFFSET_STEP,
-            plane_tol(size) + GROUP_NORMAL_TOLERANCE * size,
-        ),
+        (n.x, NORMAL_STEP, NORMAL_SHIFT, GROUP_NORMAL_TOLERANCE),
+        (n.y, NORMAL_STEP, NORMAL_SHIFT, GROUP_NORMAL_TOLERANCE),
+        (n.z, NORMAL_STEP, NORMAL_SHIFT, GROUP_NORMAL_TOLERANCE),
+        (offset, OFFSET_STEP, 0.0, 2.0 * plane_tol(size)),
     ];
     let mut keys = vec![[0i64; 4]];
-    for (axis, &(x, step, tol)) in values.iter().enumerate() {
-        let cell = (x / step).floor();
+    for (axis, &(x, step, shift, tol)) in values.iter().enumerate() {
+        let u = x / step + shift;
+        let cell = u.floor();
         let mut cells = vec![cell as i64];
-        if x - cell * step < tol {
+        if (u - cell) * step < tol {
             cells.push(cell as i64 - 1);
         }
-        if (cell + 1.0) * step - x < tol {
+        if (cell + 1.0 - u) * step < tol {
             cells.push(cell as i64 + 1);
         }
         let mut next = Vec::with_capacity(keys.len() * cells.len());
@@ -246,8 +254,40 @@ fn overlap(patches: &Patches, p: usize, q: usize) -> bool {
         return false;
     }
     let project = Projection::of(np);
-    let area = clipped_area(project.triangle(tp), project.triangle(tq)) / project.scale;
-    area >= OVERLAP_MIN_SHARE * patches.area[p].min(patches.area[q])
+    let (a, b) = (project.triangle(tp), project.triangle(tq));
+    let least = OVERLAP_MIN_SHARE * patches.area[p].min(patches.area[q]);
+    // Neighbours edge to edge (most candidates) are apart along their shared edge.
+    if separated(&a, &b, least * project.scale) {
+        return false;
+    }
+    clipped_area(a, b) / project.scale >= least
+}
+
+/// True when an edge of either counter-clockwise triangle has the other wholly outside it or
+/// within a band of it whose area along the edge is under `slack` (so no overlap of area
+/// `slack` or more is possible across it).
+fn separated(a: &[DVec2; 3], b: &[DVec2; 3], slack: f64) -> bool {
+    let outside = |t: &[DVec2; 3], u: &[DVec2; 3]| {
+        (0..3).any(|i| {
+            let (p0, p1) = (t[i], t[(i + 1) % 3]);
+            let edge = p1 - p0;
+            let length = edge.length();
+            // Signed distance times length; inside is positive.
+            let deepest = u
+                .iter()
+                .map(|&x| edge.perp_dot(x - p0))
+                .fold(f64::NEG_INFINITY, f64::max);
+            // The overlap lies within `deepest / length` of this edge, along at most the longer
+            // of the two triangles' extents: under `slack` when deepest is small enough.
+            let extent = (u[1] - u[0])
+                .length()
+                .max((u[2] - u[1]).length())
+                .max((u[0] - u[2]).length())
+                .max(length);
+            deepest <= 0.0 || (length > 0.0 && deepest / length * extent < slack)
+        })
+    };
+    outside(a, b) || outside(b, a)
 }
 
 /// Longest edge of a triangle.
@@ -305,31 +345,38 @@ fn contains(t: &[DVec2; 3], x: DVec2) -> bool {
     (0..3).all(|i| (t[(i + 1) % 3] - t[i]).perp_dot(x - t[i]) > 0.0)
 }
 
-/// Area of the intersection of two counter-clockwise triangles (Sutherland-Hodgman).
+/// Area of the intersection of two counter-clockwise triangles (Sutherland-Hodgman, on the
+/// stack: a triangle clipped by three half-planes has at most 6 corners).
 fn clipped_area(a: [DVec2; 3], b: [DVec2; 3]) -> f64 {
-    let mut poly: Vec<DVec2> = a.to_vec();
+    let mut poly = [DVec2::ZERO; 9];
+    poly[..3].copy_from_slice(&a);
+    let mut len = 3;
     for i in 0..3 {
         let (p0, p1) = (b[i], b[(i + 1) % 3]);
         let side = |x: DVec2| (p1 - p0).perp_dot(x - p0);
-        let mut out = Vec::with_capacity(poly.len() + 1);
-        for k in 0..poly.len() {
-            let (u, v) = (poly[k], poly[(k + 1) % poly.len()]);
+        let mut out = [DVec2::ZERO; 9];
+        let mut n = 0;
+        for k in 0..len {
+            let (u, v) = (poly[k], poly[(k + 1) % len]);
             let (su, sv) = (side(u), side(v));
-            if su >= 0.0 {
-                out.push(u);
+            if su >= 0.0 && n < out.len() {
+                out[n] = u;
+                n += 1;
             }
-            if (su >= 0.0) != (sv >= 0.0) {
-                out.push(u + (v - u) * (su / (su - sv)));
+            if (su >= 0.0) != (sv >= 0.0) && n < out.len() {
+                out[n] = u + (v - u) * (su / (su - sv));
+                n += 1;
             }
         }
         poly = out;
-        if poly.len() < 3 {
+        len = n;
+        if len < 3 {
             return 0.0;
         }
     }
     let mut twice = 0.0;
-    for k in 0..poly.len() {
-        twice += poly[k].perp_dot(poly[(k + 1) % poly.len()]);
+    for k in 0..len {
+        twice += poly[k].perp_dot(poly[(k + 1) % len]);
     }
     (twice * 0.5).max(0.0)
 }
