@@ -9,9 +9,9 @@
 //!
 //! [`visible_shares`] gives each overlapped patch the share of its area that shows, the mean
 //! over the patch of `1 / k(x)`, `k` the number of such patches at `x`: each of two layers shows
-//! half of their overlap. The solvers weigh what a patch sends (its radiance, its
-//! antiradiance, its emission) by that share; what it receives, and the radiance it reports,
-//! are its own. Identical triangles are not overlaps here: they are one triangle
+//! half of their overlap; an emitter shows whole. The solvers weigh what a patch sends (its
+//! radiance, its antiradiance, its emission) by that share; what it receives, and the
+//! radiance it reports, are its own. Identical triangles are not overlaps here: they are one triangle
 //! ([`crate::scene::Scene::duplicates`]).
 
 use std::collections::HashMap;
@@ -44,7 +44,8 @@ const OFFSET_STEP: f64 = 1e-3;
 const BRUTE_FORCE_MAX: usize = 32;
 
 /// Per patch, the share of its area that shows (see the module doc): 1 for a patch no other
-/// active patch overlaps, `1/2` for one wholly under one other. Empty when no two active
+/// active patch overlaps, `1/2` for one wholly under one other, 1 for an emitter (a shadow ray
+/// aimed at it is not stopped by a surface in its plane, so it lights the scene whole). Empty when no two active
 /// patches overlap (the common case: nothing to weigh). Cost: about linear in the number of
 /// patches (patches are bucketed by plane, then by a grid in their plane).
 pub fn visible_shares(patches: &Patches) -> Vec<f64> {
@@ -54,7 +55,9 @@ pub fn visible_shares(patches: &Patches) -> Vec<f64> {
     }
     let mut shares = vec![1.0; patches.len()];
     for (p, others) in partners.iter().enumerate() {
-        if !others.is_empty() {
+        // An emitter shows whole: a shadow ray aimed at it passes a coplanar surface at its own
+        // distance, in any path tracer (so two emitters in one place both light the scene).
+        if !others.is_empty() && !patches.is_emitter(p) {
             shares[p] = share_of(patches, p, others);
         }
     }
@@ -466,6 +469,21 @@ mod tests {
         assert!((mean([0, 1]) - 0.75).abs() < 0.03, "{shares:?}");
         assert!((mean([2, 3]) - 0.75).abs() < 0.03, "{shares:?}");
         assert_eq!(shares[4], 1.0, "a back face is not an overlap");
+    }
+
+    #[test]
+    fn an_emitter_shows_whole_over_a_surface() {
+        let tris: Vec<[DVec3; 3]> = [square(0.0, 0.0, true), square(0.0, 0.0, false)]
+            .concat()
+            .into_iter()
+            .chain([far()])
+            .collect();
+        let mut emission = vec![[0.0; 3]; tris.len()];
+        emission[2] = [1.0; 3];
+        emission[3] = [1.0; 3];
+        let scene = Scene::from_triangles(&tris, &vec![[0.5; 3]; tris.len()], &emission);
+        let shares = visible_shares(&build_patches(&scene, None));
+        assert_eq!(&shares[..4], &[0.5, 0.5, 1.0, 1.0]);
     }
 
     #[test]

@@ -48,7 +48,8 @@ impl Emitters {
                 } else {
                     vec![front]
                 };
-                // An emitter under another shows only its visible share.
+                // Its visible share: 1 for the scene's own emitters (`mesh::overlap`), less
+                // for an overlapped surface a relight made emit.
                 let e = e.map(|x| x * patches.visible_share(p));
                 for geom in faces {
                     emitters.patch.push(p as u32);
