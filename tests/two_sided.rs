@@ -730,3 +730,33 @@ fn a_wall_given_twice_with_different_triangulations_is_lit_as_twins() {
         );
     }
 }
+
+/// A door leaf flush with the wall between two lit rooms: a one-sided rectangle in the wall's
+/// plane facing room 0, over parts of the wall's triangles (`mesh::overlap`). Each partly
+/// covered triangle sends and blocks by the share of it that shows, spread over it: in total
+/// the wall and the door send and block once, and each room is lit as with the plain wall.
+/// (Cut along the door's edges instead, each piece weighed exactly: room 0 +1.2%, room 1
+/// +0.7%; spread: +0.8%, -0.1%.)
+#[test]
+fn a_door_flush_with_a_wall_leaves_the_rooms_as_lit() {
+    use glam::DVec3;
+    // Its two sides triangulated differently: one-sided, not merged into two-sided triangles.
+    let plain: Vec<_> = [wall_side(2, -1.0), wall_side(3, 1.0)].concat();
+    let mut with_door = plain.clone();
+    let p = |y: f64, z: f64| DVec3::new(4.0, y, z);
+    // Facing -x (room 0): counter-clockwise seen from -x.
+    let (a, b, c, d) = (p(0.0, 1.2), p(0.0, 2.1), p(2.2, 2.1), p(2.2, 1.2));
+    for t in [[a, b, c], [a, c, d]] {
+        let n = (t[1] - t[0]).cross(t[2] - t[0]);
+        with_door.push((if n.x < 0.0 { t } else { [t[0], t[2], t[1]] }, -1.0));
+    }
+    let (expected, got) = (two_rooms(&plain), two_rooms(&with_door));
+    for room in 0..2 {
+        assert!(
+            (got[room] / expected[room] - 1.0).abs() < 0.01,
+            "room {room}: {} against {} with the plain wall",
+            got[room],
+            expected[room]
+        );
+    }
+}

@@ -244,8 +244,24 @@ fn candidate_pairs(patches: &Patches, members: &[u32]) -> Vec<(u32, u32)> {
 
 /// True when patches `p` and `q` face the same way in one plane (normals within
 /// [`GROUP_NORMAL_TOLERANCE`], every corner of each within [`plane_tol`] of the other's plane)
-/// and overlap by at least [`OVERLAP_MIN_SHARE`] of the smaller one's area.
+/// and overlap by at least [`OVERLAP_MIN_SHARE`] of the smaller one's area, both one-sided.
+///
+/// Two-sided patches are left as they are (a share weighs both faces, and one face may be
+/// covered and the other not). The MGF office solved `--two-sided` (its walls slabs whose faces
+/// meet and overlap in their planes) against its two-sided path-traced reference, over both
+/// faces: 8.1% (bias -0.2%) as given; 9.1% (-6.6%) with its two-sided patches facing the same
+/// way weighed (the room side of the walls darker, the light going into the slabs).
+///
+/// Each share is spread over its whole patch: in total a partly covered patch sends and blocks
+/// what shows of it. Measured and not taken: cutting partly covered patches along the overlaps'
+/// edges, each piece weighed exactly. The hospital floor 4.46% either way, the corridor 1.58% ->
+/// 1.44%, but the MGF office 2.49% -> 2.57% (14 sweeps instead of 12, 9.5% more links) and
+/// b90_office 1.22% -> 1.25% from their references.
 fn overlap(patches: &Patches, p: usize, q: usize) -> bool {
+    // Two-sided patches are left as they are (see below).
+    if patches.is_two_sided(p) || patches.is_two_sided(q) {
+        return false;
+    }
     let (np, nq) = (patches.normal[p], patches.normal[q]);
     if (np - nq).length() > GROUP_NORMAL_TOLERANCE {
         return false;
@@ -402,10 +418,31 @@ mod tests {
         }
     }
 
-    fn shares_of(tris: &[[DVec3; 3]]) -> Vec<f64> {
+    /// Per input triangle, the area-weighted mean visible share of its patches (empty when
+    /// nothing overlaps), with `emitting` triangles emitting.
+    fn shares_with(tris: &[[DVec3; 3]], emitting: &[usize]) -> Vec<f64> {
         let n = tris.len();
-        let scene = Scene::from_triangles(tris, &vec![[0.5; 3]; n], &vec![[0.0; 3]; n]);
-        visible_shares(&build_patches(&scene, None))
+        let mut emission = vec![[0.0; 3]; n];
+        for &t in emitting {
+            emission[t] = [1.0; 3];
+        }
+        let scene = Scene::from_triangles(tris, &vec![[0.5; 3]; n], &emission);
+        let patches = build_patches(&scene, None);
+        let shares = visible_shares(&patches);
+        if shares.is_empty() {
+            return shares;
+        }
+        (0..n)
+            .map(|t| {
+                let ps = patches.first[t] as usize..patches.first[t + 1] as usize;
+                let area: f64 = ps.clone().map(|p| patches.area[p]).sum();
+                ps.map(|p| patches.area[p] * shares[p]).sum::<f64>() / area
+            })
+            .collect()
+    }
+
+    fn shares_of(tris: &[[DVec3; 3]]) -> Vec<f64> {
+        shares_with(tris, &[])
     }
 
     /// A triangle far off the squares' plane, so that no scene here is flat.
@@ -465,10 +502,13 @@ mod tests {
         let shares = shares_of(&tris);
         // Half of each square is covered twice: the area-weighted mean share of each square
         // is 1 - 0.5 / 2 = 0.75, to the sampling's resolution.
-        let mean = |ps: [usize; 2]| ps.iter().map(|&p| shares[p]).sum::<f64>() / 2.0;
+        let mean = |ts: [usize; 2]| ts.iter().map(|&t| shares[t]).sum::<f64>() / 2.0;
         assert!((mean([0, 1]) - 0.75).abs() < 0.03, "{shares:?}");
         assert!((mean([2, 3]) - 0.75).abs() < 0.03, "{shares:?}");
-        assert_eq!(shares[4], 1.0, "a back face is not an overlap");
+        assert!(
+            (shares[4] - 1.0).abs() < 1e-12,
+            "a back face is not an overlap"
+        );
     }
 
     #[test]
@@ -478,12 +518,10 @@ mod tests {
             .into_iter()
             .chain([far()])
             .collect();
-        let mut emission = vec![[0.0; 3]; tris.len()];
-        emission[2] = [1.0; 3];
-        emission[3] = [1.0; 3];
-        let scene = Scene::from_triangles(&tris, &vec![[0.5; 3]; tris.len()], &emission);
-        let shares = visible_shares(&build_patches(&scene, None));
-        assert_eq!(&shares[..4], &[0.5, 0.5, 1.0, 1.0]);
+        let shares = shares_with(&tris, &[2, 3]);
+        for (t, expected) in [0.5, 0.5, 1.0, 1.0].into_iter().enumerate() {
+            assert!((shares[t] - expected).abs() < 1e-12, "{t}: {shares:?}");
+        }
     }
 
     #[test]
