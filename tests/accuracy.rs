@@ -588,6 +588,19 @@ fn a_floor_given_twice_is_lit_as_once() {
             );
         }
     }
+    // Every surface two-sided: left as given (a share would weigh both faces).
+    let two_sided = SolverOptions {
+        two_sided: true,
+        ..SolverOptions::default()
+    };
+    let solved = antiradiance::solve::run(
+        antiradiance::solve::SolverKind::Hierarchical,
+        &build_patches(&scene, None),
+        &two_sided,
+        &hidden(),
+    )
+    .expect("solves");
+    assert!(solved.stats.overlap.is_none());
     // As two surfaces the walls come out brighter: what the test guards against.
     let as_given = solve_dense(&build_patches(&scene, None), &options, &hidden()).expect("solves");
     let plain =

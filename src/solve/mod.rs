@@ -140,8 +140,13 @@ pub fn run(
     let solved_before_sealing = solved;
     let solved = sealed.as_ref().map_or(solved, |(p, _)| p);
     // Coplanar patches facing the same way that overlap send by the share of them that shows
-    // (see `mesh::overlap`), decided on the faces as solved.
-    let overlapped = overlapped(solved);
+    // (see `mesh::overlap`), decided on the faces as solved; not when every surface is
+    // two-sided (two-sided patches are left as they are).
+    let overlapped = if options.two_sided {
+        None
+    } else {
+        overlapped(solved)
+    };
     let solved = overlapped.as_ref().unwrap_or(solved);
     let solution = match (kind, options.direct_light) {
         (SolverKind::Dense, false) => dense::solve_dense(solved, options, progress),

@@ -265,7 +265,9 @@ impl Relighter {
         }
         // Overlapping coplanar patches send by the share of them that shows, as in a solve.
         let mut patches = patches;
-        patches.visible_shares = mesh::overlap::visible_shares(&patches);
+        if !options.two_sided {
+            patches.visible_shares = mesh::overlap::visible_shares(&patches);
+        }
         let prepared = Prepared::new(&patches, options, false)?;
         let material = (0..scene.len())
             .map(|t| scene.material.get(t).copied().flatten())
