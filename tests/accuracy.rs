@@ -589,14 +589,12 @@ fn a_floor_given_twice_is_lit_as_once() {
         }
     }
     // Every surface two-sided: left as given (a share would weigh both faces).
-    let two_sided = SolverOptions {
-        two_sided: true,
-        ..SolverOptions::default()
-    };
+    let mut two_sided = scene.clone();
+    two_sided.set_two_sided();
     let solved = antiradiance::solve::run(
         antiradiance::solve::SolverKind::Hierarchical,
-        &build_patches(&scene, None),
-        &two_sided,
+        &build_patches(&two_sided, None),
+        &options,
         &hidden(),
     )
     .expect("solves");

@@ -246,9 +246,9 @@ fn candidate_pairs(patches: &Patches, members: &[u32]) -> Vec<(u32, u32)> {
 /// [`GROUP_NORMAL_TOLERANCE`], every corner of each within [`plane_tol`] of the other's plane)
 /// and overlap by at least [`OVERLAP_MIN_SHARE`] of the smaller one's area, both one-sided.
 ///
-/// Two-sided patches are left as they are, and so is a scene solved with every surface
-/// two-sided (`SolverOptions::two_sided`, where the solvers skip this; a share weighs both
-/// faces, and one face may be covered and the other not). The MGF office solved `--two-sided` (its walls slabs whose faces
+/// Two-sided patches are left as they are (a share weighs both faces, and one face may be
+/// covered and the other not); `crate::solve::run` takes the shares of the patches as given,
+/// before it turns or darkens any. The MGF office solved `--two-sided` (its walls slabs whose faces
 /// meet and overlap in their planes) against its two-sided path-traced reference, over both
 /// faces: 8.1% (bias -0.2%) as given; 9.1% (-6.6%) with its two-sided patches facing the same
 /// way weighed (the room side of the walls darker, the light going into the slabs).

@@ -265,9 +265,7 @@ impl Relighter {
         }
         // Overlapping coplanar patches send by the share of them that shows, as in a solve.
         let mut patches = patches;
-        if !options.two_sided {
-            patches.visible_shares = mesh::overlap::visible_shares(&patches);
-        }
+        patches.visible_shares = mesh::overlap::visible_shares(&patches);
         let prepared = Prepared::new(&patches, options, false)?;
         let material = (0..scene.len())
             .map(|t| scene.material.get(t).copied().flatten())
