@@ -45,11 +45,21 @@ const BRUTE_FORCE_MAX: usize = 32;
 
 /// Per patch, the share of its area that shows (see the module doc): 1 for a patch no other
 /// active patch overlaps, `1/2` for one wholly under one other, 1 for an emitter (a shadow ray
-/// aimed at it is not stopped by a surface in its plane, so it lights the scene whole). Empty when no two active
-/// patches overlap (the common case: nothing to weigh). Cost: about linear in the number of
-/// patches (patches are bucketed by plane, then by a grid in their plane).
+/// aimed at it is not stopped by a surface in its plane, so it lights the scene whole). Empty
+/// when no two active patches overlap (the common case: nothing to weigh). Cost: about linear
+/// in the number of patches (patches are bucketed by plane, then by a grid in their plane).
 pub fn visible_shares(patches: &Patches) -> Vec<f64> {
-    let partners = overlapping_partners(patches);
+    visible_shares_of(patches, &|p| patches.is_two_sided(p))
+}
+
+/// [`visible_shares`] with patch `p` taken as two-sided when `two_sided(p)` (left as it is):
+/// [`crate::solve::run`] decides on the faces as it solves them (closed objects turned out)
+/// but takes a surface's two-sidedness as given, before it darkens one of its faces.
+pub fn visible_shares_of(
+    patches: &Patches,
+    two_sided: &(dyn Fn(usize) -> bool + Sync),
+) -> Vec<f64> {
+    let partners = overlapping_partners(patches, two_sided);
     if partners.iter().all(Vec::is_empty) {
         return Vec::new();
     }
@@ -100,7 +110,10 @@ fn share_of(patches: &Patches, p: usize, others: &[u32]) -> f64 {
 /// For each patch, the active patches that overlap it coplanar and facing the same way (by at
 /// least [`OVERLAP_MIN_SHARE`] of the smaller one's area). Plane buckets are searched in
 /// parallel; a pair found in two buckets (a patch near a bucket's edge is in both) is kept once.
-fn overlapping_partners(patches: &Patches) -> Vec<Vec<u32>> {
+fn overlapping_partners(
+    patches: &Patches,
+    two_sided: &(dyn Fn(usize) -> bool + Sync),
+) -> Vec<Vec<u32>> {
     use rayon::prelude::*;
     let mut buckets: HashMap<[i64; 4], Vec<u32>> = HashMap::new();
     for p in 0..patches.len() {
@@ -117,7 +130,7 @@ fn overlapping_partners(patches: &Patches) -> Vec<Vec<u32>> {
         .flat_map_iter(|members| {
             candidate_pairs(patches, members)
                 .into_iter()
-                .filter(|&(p, q)| overlap(patches, p as usize, q as usize))
+                .filter(|&(p, q)| overlap(patches, p as usize, q as usize, two_sided))
                 .map(|(p, q)| (p.min(q), p.max(q)))
         })
         .collect();
@@ -247,20 +260,26 @@ fn candidate_pairs(patches: &Patches, members: &[u32]) -> Vec<(u32, u32)> {
 /// and overlap by at least [`OVERLAP_MIN_SHARE`] of the smaller one's area, both one-sided.
 ///
 /// Two-sided patches are left as they are (a share weighs both faces, and one face may be
-/// covered and the other not); `crate::solve::run` takes the shares of the patches as given,
-/// before it turns or darkens any. The MGF office solved `--two-sided` (its walls slabs whose faces
-/// meet and overlap in their planes) against its two-sided path-traced reference, over both
-/// faces: 8.1% (bias -0.2%) as given; 9.1% (-6.6%) with its two-sided patches facing the same
-/// way weighed (the room side of the walls darker, the light going into the slabs).
+/// covered and the other not); `crate::solve::run` takes two-sidedness as given, before it
+/// darkens any face ([`visible_shares_of`]). The MGF office solved `--two-sided` (its walls
+/// slabs whose faces meet and overlap in their planes) against its two-sided path-traced
+/// reference, over both faces: 8.1% (bias -0.2%) as given; 9.1% (-6.6%) with its two-sided
+/// patches facing the same way weighed (the room side of the walls darker, the light going
+/// into the slabs).
 ///
 /// Each share is spread over its whole patch: in total a partly covered patch sends and blocks
 /// what shows of it. Measured and not taken: cutting partly covered patches along the overlaps'
 /// edges, each piece weighed exactly. The hospital floor 4.46% either way, the corridor 1.58% ->
 /// 1.44%, but the MGF office 2.49% -> 2.57% (14 sweeps instead of 12, 9.5% more links) and
 /// b90_office 1.22% -> 1.25% from their references.
-fn overlap(patches: &Patches, p: usize, q: usize) -> bool {
+fn overlap(
+    patches: &Patches,
+    p: usize,
+    q: usize,
+    two_sided: &(dyn Fn(usize) -> bool + Sync),
+) -> bool {
     // Two-sided patches are left as they are (see below).
-    if patches.is_two_sided(p) || patches.is_two_sided(q) {
+    if two_sided(p) || two_sided(q) {
         return false;
     }
     let (np, nq) = (patches.normal[p], patches.normal[q]);

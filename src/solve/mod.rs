@@ -140,9 +140,10 @@ pub fn run(
     let solved_before_sealing = solved;
     let solved = sealed.as_ref().map_or(solved, |(p, _)| p);
     // Coplanar patches facing the same way that overlap send by the share of them that shows
-    // (see `mesh::overlap`), decided on the faces as given: a two-sided surface stays as it
-    // is, also where the steps above made one of its faces dark (the MGF office two-sided,
-    // its sealed slab faces weighed: 8.1% -> 9.1% from its reference).
+    // (see `mesh::overlap`), decided on the faces as solved (closed objects turned out), a
+    // surface two-sided as given left as it is, also where the steps above made one of its
+    // faces dark (the MGF office two-sided, its sealed slab faces weighed: 8.1% -> 9.1% from
+    // its reference).
     let overlapped = overlapped(patches, solved);
     let solved = overlapped.as_ref().unwrap_or(solved);
     let solution = match (kind, options.direct_light) {
@@ -189,10 +190,11 @@ pub fn run(
     Ok(solution)
 }
 
-/// `solved` (the same patches as `given`, some turned or darkened) with the visible shares of
-/// `given` ([`crate::mesh::overlap::visible_shares`]); `None` when no two of them overlap.
+/// `solved` (the same patches as `given`, some turned or darkened) with its visible shares
+/// ([`crate::mesh::overlap::visible_shares_of`]), the patches two-sided in `given` left as
+/// they are; `None` when no two of them overlap.
 fn overlapped(given: &Patches, solved: &Patches) -> Option<Patches> {
-    let shares = crate::mesh::overlap::visible_shares(given);
+    let shares = crate::mesh::overlap::visible_shares_of(solved, &|p| given.is_two_sided(p));
     (!shares.is_empty()).then(|| {
         let mut out = solved.clone();
         out.visible_shares = shares;
