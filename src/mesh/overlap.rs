@@ -18,6 +18,7 @@ use std::collections::HashMap;
 
 use glam::{DVec2, DVec3};
 
+use crate::geometry::longest_edge;
 use crate::geometry::tolerances::{plane_tol, GROUP_NORMAL_TOLERANCE};
 use crate::mesh::Patches;
 
@@ -92,11 +93,9 @@ fn share_of(patches: &Patches, p: usize, others: &[u32]) -> f64 {
     let point = |u: f64, v: f64| a + (b - a) * (u / n as f64) + (c - a) * (v / n as f64);
     for i in 0..n {
         for j in 0..n - i {
-            let mut inside = vec![point(i as f64 + s, j as f64 + t)];
-            if i + j + 1 < n {
-                inside.push(point(i as f64 + 1.0 - t, j as f64 + 1.0 - s));
-            }
-            for x in inside {
+            let upright = point(i as f64 + s, j as f64 + t);
+            let inverted = (i + j + 1 < n).then(|| point(i as f64 + 1.0 - t, j as f64 + 1.0 - s));
+            for x in std::iter::once(upright).chain(inverted) {
                 let x2 = project.point(x);
                 let k = others.iter().filter(|t| contains(t, x2)).count();
                 sum += 1.0 / (1 + k) as f64;
@@ -223,11 +222,14 @@ fn candidate_pairs(patches: &Patches, members: &[u32]) -> Vec<(u32, u32)> {
     let cell = sizes[m / 2].max(1e-12);
     let cell_of = |x: f64| (x / cell).floor() as i64;
     let mut grid: HashMap<(i64, i64), Vec<usize>> = HashMap::new();
-    let mut large = Vec::new();
+    let mut is_large = vec![false; m];
+    // Each member's lowest cell, for taking a pair in one of the cells it shares only.
+    let mut first = vec![(0i64, 0i64); m];
     for (i, (lo, hi)) in bounds.iter().enumerate() {
         let (x0, x1, y0, y1) = (cell_of(lo.x), cell_of(hi.x), cell_of(lo.y), cell_of(hi.y));
+        first[i] = (x0, y0);
         if x1 - x0 > 8 || y1 - y0 > 8 {
-            large.push(i);
+            is_large[i] = true;
             continue;
         }
         for x in x0..=x1 {
@@ -236,18 +238,21 @@ fn candidate_pairs(patches: &Patches, members: &[u32]) -> Vec<(u32, u32)> {
             }
         }
     }
-    for cell in grid.values() {
+    for (&(x, y), cell) in &grid {
         for (a, &i) in cell.iter().enumerate() {
             for &j in &cell[a + 1..] {
-                if !apart(i, j) {
+                // The first cell both lie in: the pair is taken there and nowhere else.
+                let shared = (first[i].0.max(first[j].0), first[i].1.max(first[j].1));
+                if shared == (x, y) && !apart(i, j) {
                     pairs.push((members[i], members[j]));
                 }
             }
         }
     }
-    for &i in &large {
-        for j in 0..m {
-            if j != i && !apart(i, j) {
+    for i in (0..m).filter(|&i| is_large[i]) {
+        // Two large members: the pair once, from the first of them.
+        for j in (0..m).filter(|&j| j != i && !(is_large[j] && j < i)) {
+            if !apart(i, j) {
                 pairs.push((members[i], members[j]));
             }
         }
@@ -327,14 +332,6 @@ fn separated(a: &[DVec2; 3], b: &[DVec2; 3], slack: f64) -> bool {
         })
     };
     outside(a, b) || outside(b, a)
-}
-
-/// Longest edge of a triangle.
-fn longest_edge(t: &[DVec3; 3]) -> f64 {
-    (t[1] - t[0])
-        .length()
-        .max((t[2] - t[1]).length())
-        .max((t[0] - t[2]).length())
 }
 
 /// Projection onto the coordinate plane most nearly parallel to a plane of normal `n`:
