@@ -64,8 +64,10 @@ fn furnace_dense_and_hierarchical() {
 /// they got too much: the closed furnace box split into patches of at most 0.03 had patches
 /// from 1.85 to 2.20 (2 exactly; 10% off), and the 66k-triangle Cornell box's first row of
 /// triangles along its edges was 3.95% too bright against the path tracer. With each
-/// element's own sender cosine (per element, and in fields to second order) every patch is
-/// within 1% (measured 1.987 to 2.003), at the edges as in the middle.
+/// element's own sender cosine (per element, and in fields to second order) the edges are as
+/// bright as the rest: measured 1.978 to 2.004 at the edges, 1.975 to 2.003 elsewhere (every
+/// patch within 1.3%, the coarse links the flux rule keeps, `LinkParams::flux_share`, at its
+/// default 2e-5; at 5e-6, 1.987 to 2.003 everywhere).
 #[test]
 fn the_edges_of_a_closed_box_are_as_bright_as_its_faces() {
     let scene = generated::furnace_box(1.0, 0.5);
@@ -102,7 +104,12 @@ fn the_edges_of_a_closed_box_are_as_bright_as_its_faces() {
     }
     assert!(edge.1 > 0.0 && middle.1 > 0.0, "both bands have patches");
     eprintln!("edge patches {edge:?}, the others {middle:?}, worst {worst}");
-    assert!(worst < 0.01, "a patch {:.2}% off", 100.0 * worst);
+    assert!(worst < 0.015, "a patch {:.2}% off", 100.0 * worst);
+    // The edges within the range of the others, to 0.5% of the answer.
+    assert!(
+        edge.0 > middle.0 - 0.01 && edge.1 < middle.1 + 0.01,
+        "edge patches {edge:?} outside the others' {middle:?}"
+    );
 }
 
 #[test]

@@ -117,7 +117,7 @@ pub struct SolverArgs {
     #[arg(long, value_name = "E", allow_negative_numbers = true)]
     pub epsilon: Option<f64>,
     /// Largest share of the scene's transport a geometrically coarse link may carry and still
-    /// be kept (0 refines by geometry alone); default 5e-6.
+    /// be kept (0 refines by geometry alone); default 2e-5.
     #[arg(long, value_name = "S", allow_negative_numbers = true)]
     pub flux_share: Option<f64>,
     /// Faint pairs whose bounding spheres overlap become one link each instead of exact

@@ -43,7 +43,7 @@ pub struct SolverOptions {
     /// Largest share of the scene's transport a geometrically coarse link may carry and still
     /// be kept ([`crate::hierarchy::links::LinkParams::flux_share`]): small receivers
     /// (furniture, slivers) are not refined for light they barely carry. 0 turns it off;
-    /// 0..1e-4; [`crate::hierarchy::links::FLUX_SHARE`] (5e-6) by default.
+    /// 0..1e-4; [`crate::hierarchy::links::FLUX_SHARE`] (2e-5) by default.
     pub flux_share: f64,
     /// Faint pairs whose bounding spheres overlap become one cluster link each instead of exact
     /// couplings between their elements ([`crate::hierarchy::links::LinkParams::faint_links`]):
