@@ -6,6 +6,9 @@
 //! its notch and a wall with a doorway cut into its outline covers the doorway twice (once
 //! with each orientation, which the solver would take as two surfaces), so concave polygons
 //! are ear-clipped in the polygon's plane.
+//!
+//! Also the 2-D tools of a plane that mesh code shares: [`PlaneFrame`] (coordinates in a
+//! plane) and [`triangle_overlap_area`] (where two flat triangles overlap).
 
 use glam::{DVec2, DVec3};
 
@@ -73,6 +76,43 @@ fn projected(corners: &[DVec3]) -> Option<Vec<DVec2>> {
     let unit = normal.try_normalize()?;
     let frame = PlaneFrame::new(origin, unit);
     Some(corners.iter().map(|&p| frame.flat(p)).collect())
+}
+
+/// Area of the intersection of 2-D triangle `a` with the counter-clockwise triangle `b`
+/// (Sutherland-Hodgman, on the stack: a triangle clipped by three half-planes has at most 6
+/// corners); 0 when `a` runs clockwise.
+pub fn triangle_overlap_area(a: &[DVec2; 3], b: &[DVec2; 3]) -> f64 {
+    let mut poly = [DVec2::ZERO; 9];
+    poly[..3].copy_from_slice(a);
+    let mut len = 3;
+    for i in 0..3 {
+        let (p0, p1) = (b[i], b[(i + 1) % 3]);
+        let side = |x: DVec2| (p1 - p0).perp_dot(x - p0);
+        let mut out = [DVec2::ZERO; 9];
+        let mut n = 0;
+        for k in 0..len {
+            let (u, v) = (poly[k], poly[(k + 1) % len]);
+            let (su, sv) = (side(u), side(v));
+            if su >= 0.0 && n < out.len() {
+                out[n] = u;
+                n += 1;
+            }
+            if (su >= 0.0) != (sv >= 0.0) && n < out.len() {
+                out[n] = u + (v - u) * (su / (su - sv));
+                n += 1;
+            }
+        }
+        poly = out;
+        len = n;
+        if len < 3 {
+            return 0.0;
+        }
+    }
+    let mut twice = 0.0;
+    for k in 0..len {
+        twice += poly[k].perp_dot(poly[(k + 1) % len]);
+    }
+    (twice * 0.5).max(0.0)
 }
 
 /// A frame of the plane through `origin` with unit normal `n`: 2-D coordinates,
@@ -170,6 +210,16 @@ pub fn ear_clip(points: &[DVec2]) -> Option<Vec<[usize; 3]>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn overlap_area_of_two_triangles() {
+        let t = [DVec2::ZERO, DVec2::X, DVec2::Y];
+        assert!((triangle_overlap_area(&t, &t) - 0.5).abs() < 1e-15);
+        let moved = t.map(|v| v + DVec2::new(0.5, 0.0));
+        assert!((triangle_overlap_area(&t, &moved) - 0.125).abs() < 1e-15);
+        let apart = t.map(|v| v + DVec2::new(2.0, 0.0));
+        assert_eq!(triangle_overlap_area(&t, &apart), 0.0);
+    }
 
     fn area(corners: &[DVec3], tris: &[[usize; 3]]) -> (f64, DVec3) {
         let mut total = 0.0;

@@ -19,6 +19,7 @@ use std::collections::HashMap;
 use glam::{DVec2, DVec3};
 
 use crate::geometry::longest_edge;
+use crate::geometry::polygon::{triangle_overlap_area, PlaneFrame};
 use crate::geometry::tolerances::{plane_tol, GROUP_NORMAL_TOLERANCE};
 use crate::mesh::Patches;
 
@@ -77,11 +78,11 @@ pub fn visible_shares_of(
 
 /// The mean of `1 / (1 + covering partners)` over the sample points of patch `p`.
 fn share_of(patches: &Patches, p: usize, others: &[u32]) -> f64 {
-    let project = Projection::of(patches.normal[p]);
+    let frame = PlaneFrame::new(DVec3::ZERO, patches.normal[p]);
     let [a, b, c] = patches.corners[p];
     let others: Vec<[DVec2; 3]> = others
         .iter()
-        .map(|&q| project.triangle(&patches.corners[q as usize]))
+        .map(|&q| flat_triangle(&frame, &patches.corners[q as usize]))
         .collect();
     let n = OVERLAP_SAMPLES;
     let mut sum = 0.0;
@@ -96,7 +97,7 @@ fn share_of(patches: &Patches, p: usize, others: &[u32]) -> f64 {
             let upright = point(i as f64 + s, j as f64 + t);
             let inverted = (i + j + 1 < n).then(|| point(i as f64 + 1.0 - t, j as f64 + 1.0 - s));
             for x in std::iter::once(upright).chain(inverted) {
-                let x2 = project.point(x);
+                let x2 = frame.flat(x);
                 let k = others.iter().filter(|t| contains(t, x2)).count();
                 sum += 1.0 / (1 + k) as f64;
                 count += 1;
@@ -189,11 +190,11 @@ fn plane_keys(patches: &Patches, p: usize) -> Vec<[i64; 4]> {
 /// small bucket, else the pairs that share a cell of a grid whose cells are about the members'
 /// median size (a member larger than 8 cells a side is paired with every member it bounds).
 fn candidate_pairs(patches: &Patches, members: &[u32]) -> Vec<(u32, u32)> {
-    let project = Projection::of(patches.normal[members[0] as usize]);
+    let frame = PlaneFrame::new(DVec3::ZERO, patches.normal[members[0] as usize]);
     let bounds: Vec<(DVec2, DVec2)> = members
         .iter()
         .map(|&p| {
-            let t = project.triangle(&patches.corners[p as usize]);
+            let t = flat_triangle(&frame, &patches.corners[p as usize]);
             (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]))
         })
         .collect();
@@ -297,14 +298,14 @@ fn overlap(
     if !(off(tq, np, tp[0]) && off(tp, nq, tq[0])) {
         return false;
     }
-    let project = Projection::of(np);
-    let (a, b) = (project.triangle(tp), project.triangle(tq));
+    let frame = PlaneFrame::new(DVec3::ZERO, np);
+    let (a, b) = (flat_triangle(&frame, tp), flat_triangle(&frame, tq));
     let least = OVERLAP_MIN_SHARE * patches.area[p].min(patches.area[q]);
     // Neighbours edge to edge (most candidates) are apart along their shared edge.
-    if separated(&a, &b, least * project.scale) {
+    if separated(&a, &b, least) {
         return false;
     }
-    clipped_area(a, b) / project.scale >= least
+    triangle_overlap_area(&a, &b) >= least
 }
 
 /// True when an edge of either counter-clockwise triangle has the other wholly outside it or
@@ -334,87 +335,20 @@ fn separated(a: &[DVec2; 3], b: &[DVec2; 3], slack: f64) -> bool {
     outside(a, b) || outside(b, a)
 }
 
-/// Projection onto the coordinate plane most nearly parallel to a plane of normal `n`:
-/// areas shrink by `scale` (the normal's largest component, in absolute value).
-struct Projection {
-    drop: usize,
-    scale: f64,
-}
-
-impl Projection {
-    fn of(n: DVec3) -> Projection {
-        let a = n.abs();
-        let drop = if a.x >= a.y && a.x >= a.z {
-            0
-        } else if a.y >= a.z {
-            1
-        } else {
-            2
-        };
-        Projection {
-            drop,
-            scale: a[drop].max(1e-12),
-        }
-    }
-
-    fn point(&self, v: DVec3) -> DVec2 {
-        match self.drop {
-            0 => DVec2::new(v.y, v.z),
-            1 => DVec2::new(v.z, v.x),
-            _ => DVec2::new(v.x, v.y),
-        }
-    }
-
-    /// The projected triangle, counter-clockwise.
-    fn triangle(&self, t: &[DVec3; 3]) -> [DVec2; 3] {
-        let [a, b, c] = t.map(|v| self.point(v));
-        if (b - a).perp_dot(c - a) < 0.0 {
-            [a, c, b]
-        } else {
-            [a, b, c]
-        }
+/// The 2-D coordinates of triangle `t` in `frame` (a frame of a plane it lies in, within
+/// tolerance), counter-clockwise.
+fn flat_triangle(frame: &PlaneFrame, t: &[DVec3; 3]) -> [DVec2; 3] {
+    let [a, b, c] = t.map(|v| frame.flat(v));
+    if (b - a).perp_dot(c - a) < 0.0 {
+        [a, c, b]
+    } else {
+        [a, b, c]
     }
 }
 
 /// True when `x` lies inside the counter-clockwise triangle `t` (its edges excluded).
 fn contains(t: &[DVec2; 3], x: DVec2) -> bool {
     (0..3).all(|i| (t[(i + 1) % 3] - t[i]).perp_dot(x - t[i]) > 0.0)
-}
-
-/// Area of the intersection of two counter-clockwise triangles (Sutherland-Hodgman, on the
-/// stack: a triangle clipped by three half-planes has at most 6 corners).
-fn clipped_area(a: [DVec2; 3], b: [DVec2; 3]) -> f64 {
-    let mut poly = [DVec2::ZERO; 9];
-    poly[..3].copy_from_slice(&a);
-    let mut len = 3;
-    for i in 0..3 {
-        let (p0, p1) = (b[i], b[(i + 1) % 3]);
-        let side = |x: DVec2| (p1 - p0).perp_dot(x - p0);
-        let mut out = [DVec2::ZERO; 9];
-        let mut n = 0;
-        for k in 0..len {
-            let (u, v) = (poly[k], poly[(k + 1) % len]);
-            let (su, sv) = (side(u), side(v));
-            if su >= 0.0 && n < out.len() {
-                out[n] = u;
-                n += 1;
-            }
-            if (su >= 0.0) != (sv >= 0.0) && n < out.len() {
-                out[n] = u + (v - u) * (su / (su - sv));
-                n += 1;
-            }
-        }
-        poly = out;
-        len = n;
-        if len < 3 {
-            return 0.0;
-        }
-    }
-    let mut twice = 0.0;
-    for k in 0..len {
-        twice += poly[k].perp_dot(poly[(k + 1) % len]);
-    }
-    (twice * 0.5).max(0.0)
 }
 
 #[cfg(test)]
@@ -539,15 +473,5 @@ mod tests {
         for (t, expected) in [0.5, 0.5, 1.0, 1.0].into_iter().enumerate() {
             assert!((shares[t] - expected).abs() < 1e-12, "{t}: {shares:?}");
         }
-    }
-
-    #[test]
-    fn clipped_area_of_two_triangles() {
-        let t = [DVec2::ZERO, DVec2::X, DVec2::Y];
-        assert!((clipped_area(t, t) - 0.5).abs() < 1e-15);
-        let moved = t.map(|v| v + DVec2::new(0.5, 0.0));
-        assert!((clipped_area(t, moved) - 0.125).abs() < 1e-15);
-        let apart = t.map(|v| v + DVec2::new(2.0, 0.0));
-        assert_eq!(clipped_area(t, apart), 0.0);
     }
 }

@@ -117,33 +117,6 @@ pub(super) fn merge_region(scene: &Scene, region: &[usize], frame: &PlaneFrame) 
         .then_some(merged)
 }
 
-/// Area of the intersection of two counter-clockwise 2D triangles (Sutherland-Hodgman).
-pub(super) fn overlap_area(a: &[DVec2; 3], b: &[DVec2; 3]) -> f64 {
-    let mut poly: Vec<DVec2> = a.to_vec();
-    for e in 0..3 {
-        let (p, q) = (b[e], b[(e + 1) % 3]);
-        let side = |x: DVec2| (q - p).perp_dot(x - p);
-        let input = std::mem::take(&mut poly);
-        for i in 0..input.len() {
-            let (s, t) = (input[i], input[(i + 1) % input.len()]);
-            let (ds, dt) = (side(s), side(t));
-            if ds >= 0.0 {
-                poly.push(s);
-            }
-            if (ds >= 0.0) != (dt >= 0.0) {
-                poly.push(s + (t - s) * (ds / (ds - dt)));
-            }
-        }
-        if poly.len() < 3 {
-            return 0.0;
-        }
-    }
-    let area2: f64 = (0..poly.len())
-        .map(|i| poly[i].perp_dot(poly[(i + 1) % poly.len()]))
-        .sum();
-    (0.5 * area2).max(0.0)
-}
-
 /// `huge-tiny`: the largest flat region merged, the object nearest to it split into at least
 /// `tiny` triangles.
 pub(super) fn huge_tiny(scene: &Scene, tiny: usize) -> Result<(Out, String)> {
@@ -400,7 +373,7 @@ fn merged_rows(scene: &Scene, huge: &HugeRegion) -> Vec<Vec<(usize, f64)>> {
             if tmin.x > fmax.x || tmin.y > fmax.y || tmax.x < fmin.x || tmax.y < fmin.y {
                 continue;
             }
-            let a = overlap_area(&flat, tri);
+            let a = crate::geometry::polygon::triangle_overlap_area(&flat, tri);
             if a > VARIANT_OVERLAP * flat_area(&flat).abs() {
                 overlaps.push((m, a));
             }
