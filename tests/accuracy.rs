@@ -551,15 +551,18 @@ fn a_floor_given_twice_is_lit_as_once() {
         scene.emission.push([0.0; 3]);
         scene.material.push(scene.material[0]);
     }
-    let walls = 2..plain_scene.len();
-    let mean = |solution: &antiradiance::solve::solution::Solution| {
-        let (mut num, mut den) = (0.0, 0.0);
-        for t in walls.clone().filter(|&t| !plain_scene.is_emitter(t)) {
-            num += scene.area(t) * solution.triangle_radiance[t].iter().sum::<f64>();
-            den += scene.area(t);
-        }
-        num / den
+    // The area-weighted mean radiance (summed over channels) of triangles `ts`.
+    let area_mean = |solution: &antiradiance::solve::solution::Solution, ts: &[usize]| {
+        let num: f64 = ts
+            .iter()
+            .map(|&t| scene.area(t) * solution.triangle_radiance[t].iter().sum::<f64>())
+            .sum();
+        num / ts.iter().map(|&t| scene.area(t)).sum::<f64>()
     };
+    let walls: Vec<usize> = (2..plain_scene.len())
+        .filter(|&t| !plain_scene.is_emitter(t))
+        .collect();
+    let mean = |solution: &antiradiance::solve::solution::Solution| area_mean(solution, &walls);
     let options = SolverOptions::default();
     for kind in [
         antiradiance::solve::SolverKind::Hierarchical,
@@ -579,16 +582,9 @@ fn a_floor_given_twice_is_lit_as_once() {
         );
         // Each copy reports the floor's radiance (area-weighted over its two triangles).
         let n = plain_scene.len();
-        let floor_mean = |solution: &antiradiance::solve::solution::Solution, ts: [usize; 2]| {
-            let num: f64 = ts
-                .iter()
-                .map(|&t| scene.area(t) * solution.triangle_radiance[t].iter().sum::<f64>())
-                .sum();
-            num / ts.iter().map(|&t| scene.area(t)).sum::<f64>()
-        };
-        let floor_b = floor_mean(&plain, [0, 1]);
+        let floor_b = area_mean(&plain, &[0, 1]);
         for copy in [[0, 1], [n, n + 1]] {
-            let b = floor_mean(&twice, copy);
+            let b = area_mean(&twice, &copy);
             assert!(
                 (b / floor_b - 1.0).abs() < 0.01,
                 "{kind:?}: floor copy {copy:?}: {b:.5} against {floor_b:.5}"
