@@ -316,6 +316,52 @@ fn a_slab_a_lit_wall_runs_through_is_dark_inside() {
     }
 }
 
+/// A shelf through the slab: a plate facing down, 0.05 m under the slab's top, from inside
+/// the slab out through its side into the room. Out in the room its underside sees the lit
+/// floor but no light itself (the light is above its plane): it is lit only by what it sees.
+/// Inside the slab it is a shelf whose underside sees only the slab: rays from the slab's
+/// faces that meet it there meet no light (as a wall's end face that frames a door, lit by
+/// the room through the opening, runs on through the lintel box above the door). The slab
+/// stays sealed and dark inside; the plate is lit.
+#[test]
+fn a_slab_a_shelf_lit_by_the_room_runs_through_is_dark_inside() {
+    let (mut scene, first) = scene_with_slab(false);
+    let slab = first..scene.len();
+    let base = scene.positions.len() as u32;
+    for (x, z) in [(0.65, 0.65), (1.4, 0.65), (1.4, 0.95), (0.65, 0.95)] {
+        scene.positions.push(DVec3::new(x, 0.45, z));
+    }
+    for t in [[0, 1, 2], [0, 2, 3]] {
+        scene.triangles.push(t.map(|k| base + k));
+        scene.albedo.push([0.5; 3]);
+        scene.emission.push([0.0; 3]);
+        scene.material.push(None);
+    }
+    let shelf = slab.end..scene.len();
+    let patches = build_patches(&scene, None);
+    for t in shelf.clone() {
+        assert!(patches.normal[t].y < -0.99, "the shelf faces down: {t}");
+    }
+    let sealed = sealed_fronts(&patches);
+    assert!(
+        shelf.clone().all(|t| !sealed[t]),
+        "the shelf is lit: {:?}",
+        &sealed[shelf.clone()]
+    );
+    assert!(
+        slab.clone().all(|t| sealed[t]),
+        "{:?}",
+        &sealed[slab.clone()]
+    );
+    let got = solve(&scene);
+    for t in slab {
+        assert_eq!(got.triangle_radiance[t], [0.0; 3], "triangle {t}");
+    }
+    for t in shelf {
+        assert!(got.triangle_radiance[t][0] > 0.0, "triangle {t} is lit");
+    }
+}
+
 /// A plate facing down 0.5 m over a floor, lit by a point light above it or by a sky, with no
 /// emitting triangle: the plate's underside sees only the floor, which the light reaches
 /// around the plate's shadow. The floor's direct light from the analytic light is a source,
