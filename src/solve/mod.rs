@@ -138,14 +138,29 @@ pub fn run(
         None
     };
     let solved_before_sealing = solved;
-    let solved = sealed.as_ref().map_or(solved, |(p, _)| p);
+    let (mut sealed_patches, sealed) = match sealed {
+        Some((p, what)) => (Some(p), Some(what)),
+        None => (None, None),
+    };
     // Coplanar patches facing the same way that overlap send by the share of them that shows
     // (see `mesh::overlap`), decided on the faces as solved (closed objects turned out), a
     // surface two-sided as given left as it is, also where the steps above made one of its
     // faces dark (the MGF office two-sided, its sealed slab faces weighed: 8.1% -> 9.1% from
-    // its reference).
-    let overlapped = overlapped(patches, solved);
-    let solved = overlapped.as_ref().unwrap_or(solved);
+    // its reference). The shares go onto the sealed copy where there is one, not a copy of it.
+    let shares = crate::mesh::overlap::visible_shares_of(
+        sealed_patches.as_ref().unwrap_or(solved_before_sealing),
+        &|p| patches.is_two_sided(p),
+    );
+    let overlapped = (!shares.is_empty()).then(|| {
+        let mut out = sealed_patches
+            .take()
+            .unwrap_or_else(|| solved_before_sealing.clone());
+        out.visible_shares = shares;
+        out
+    });
+    let solved = (overlapped.as_ref())
+        .or(sealed_patches.as_ref())
+        .unwrap_or(solved_before_sealing);
     let solution = match (kind, options.direct_light) {
         (SolverKind::Dense, false) => dense::solve_dense(solved, options, progress),
         (SolverKind::Hierarchical, false) => {
@@ -161,7 +176,7 @@ pub fn run(
         solution.stats.overlap = Some(solution::OverlapStats::of(shown));
     }
     // Inner first: the sealed faces were decided on the patches turned outward.
-    if let Some((_, what)) = &sealed {
+    if let Some(what) = &sealed {
         solution.restore_outward(
             &crate::mesh::closed::Outward {
                 turned_two_sided: what.turned_two_sided.clone(),
@@ -188,16 +203,4 @@ pub fn run(
     // whatever the solver left there.
     solution.settle_inactive(patches_in);
     Ok(solution)
-}
-
-/// `solved` (the same patches as `given`, some turned or darkened) with its visible shares
-/// ([`crate::mesh::overlap::visible_shares_of`]), the patches two-sided in `given` left as
-/// they are; `None` when no two of them overlap.
-fn overlapped(given: &Patches, solved: &Patches) -> Option<Patches> {
-    let shares = crate::mesh::overlap::visible_shares_of(solved, &|p| given.is_two_sided(p));
-    (!shares.is_empty()).then(|| {
-        let mut out = solved.clone();
-        out.visible_shares = shares;
-        out
-    })
 }
