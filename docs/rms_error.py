@@ -4,7 +4,8 @@ noise removed, from two references of the same spp and different seeds.
 
 Usage: python3 docs/rms_error.py estimate.csv reference_seed_a.csv reference_seed_b.csv
 
-The reference is the mean of the two, B* = (a + b) / 2; its per-triangle variance is estimated
+Two-sided results (the CSVs of `--two-sided` runs, with `back_r,back_g,back_b`) count both
+faces: six channels per triangle instead of three. The reference is the mean of the two, B* = (a + b) / 2; its per-triangle variance is estimated
 as se^2 = (a - b)^2 / 4. Over the non-emissive triangles and the three channels, area-weighted:
 
     rms^2      = sum A (B - B*)^2 / sum A B*^2
@@ -33,11 +34,14 @@ def main(argv):
         argv = argv[:i] + argv[i + 2:]
     est, ra, rb = (load(p) for p in argv[:3])
     num = noise = one_run = den = 0.0
+    channels = ["r", "g", "b"]
+    if est and all("back_r" in rows[0] for rows in (est, ra, rb) if rows):
+        channels += ["back_r", "back_g", "back_b"]
     for e, a, b in zip(est, ra, rb):
         if a["emissive"] == "1":
             continue
         area = float(a["area"])
-        for c in "rgb":
+        for c in channels:
             x, ya, yb = float(e[c]), float(a[c]), float(b[c])
             ref = 0.5 * (ya + yb)
             num += area * (x - ref) ** 2

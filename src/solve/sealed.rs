@@ -21,12 +21,12 @@
 //! light. A face lit by light counts where the point met sees an emitter (shadow rays as
 //! above); a face lit only by what it sees lit counts where the point met sees one of the
 //! points at which that face's own rays met light ([`LIT_POINTS_CHECKED`] of them,
-//! unoccluded). Measured on that office solved two-sided (`--two-sided`), against its
-//! two-sided path-traced reference (2,048 spp, rms with the reference's noise removed):
-//! counted wherever it was met, 11.5% in a slow tail of 158 sweeps; checked at the point for
-//! faces lit by light only, 9.0% in 30 sweeps (the door's end faces, lit by the room, lit the
+//! unoccluded). Measured on that office solved two-sided (`--two-sided`), against two
+//! two-sided path-traced references (2,048 spp, rms over both faces with the references' noise
+//! removed): counted wherever it was met, a slow tail of 158 sweeps; checked at the point for
+//! faces lit by light only, 11.1% in 30 sweeps (the door's end faces, lit by the room, lit the
 //! lintel boxes above the doors, light that converged slowly in the boxes); checked at the
-//! point for every lit face, 3.1% in 15 sweeps, in half the time (73 -> 37 s). One-sided, the
+//! point for every lit face, 7.0% in 15 sweeps (63.5 -> 40.7 s in one batch). One-sided, the
 //! MGF office, classroom and hospital floor, b90_office, the corridor and the bear in a room
 //! move by at most 0.01 points from their references.
 //! The rest, once that has spread as far as it goes, are sealed: they see light through a
