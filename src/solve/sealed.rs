@@ -223,7 +223,7 @@ pub fn sealed_faces(patches: &Patches) -> (Vec<bool>, Vec<bool>) {
         .collect();
     // 2. The others cast their cosine rays (a face that sees more than `allowed` of those
     //    already lit is lit, and stops), then the rest of their shadow rays.
-    let seen: Vec<Option<Seen>> = (0..2 * n)
+    let mut seen: Vec<Option<Seen>> = (0..2 * n)
         .into_par_iter()
         .map(|f| {
             if !candidate[f] {
@@ -341,8 +341,11 @@ pub fn sealed_faces(patches: &Patches) -> (Vec<bool>, Vec<bool>) {
         .collect();
     // Per face, the points where its rays met light (step 2, then as light spreads).
     let mut lit_points: Vec<Vec<(DVec3, u32)>> = seen
-        .iter()
-        .map(|s| s.as_ref().map_or(Vec::new(), |s| s.lit_points.clone()))
+        .iter_mut()
+        .map(|s| {
+            s.as_mut()
+                .map_or(Vec::new(), |s| std::mem::take(&mut s.lit_points))
+        })
         .collect();
     for (f, hits) in met.iter().enumerate() {
         for hit in hits.iter().filter(|h| h.sees) {
