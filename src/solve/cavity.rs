@@ -226,45 +226,72 @@ impl Cavities {
     }
 }
 
-/// The covers of emitter `p`'s face toward `axis` (its normal or the opposite), when every one
-/// of its grid points' rays along `axis` meets a surface that does not emit within the gap;
-/// `None` otherwise.
-fn covers_of(patches: &Patches, scene: &RayScene, p: usize, axis: DVec3) -> Option<Vec<Cover>> {
+/// The rays of the cover test of patch `p`'s face toward `axis` (its normal or the
+/// opposite): the gap ([`COVERED_GAP`] of the patch's size), the direction, and the
+/// [`COVER_POINTS_SIDE`] x [`COVER_POINTS_SIDE`] grid points on the triangle.
+fn cover_rays(patches: &Patches, p: usize, axis: DVec3) -> (f64, DVec3, Vec<DVec3>) {
     let tri = &patches.corners[p];
     let gap = COVERED_GAP * patches.area[p].sqrt();
     // Tilted off the normal by 0.01 rad: a ray exactly along an axis can slip past a flat box
     // of the BVH.
     let dir: DVec3 = (axis + 0.01 * (tri[1] - tri[0]).normalize()).normalize();
     let side = COVER_POINTS_SIDE;
-    let share = 1.0 / (side * side) as f64;
-    let mut covers: Vec<Cover> = Vec::new();
-    for i in 0..side {
-        for j in 0..side {
+    let points = (0..side * side)
+        .map(|k| {
+            let (i, j) = (k / side, k % side);
             let (u1, u2) = (
                 (i as f64 + 0.5) / side as f64,
                 (j as f64 + 0.5) / side as f64,
             );
-            let x = crate::geometry::sampling::point_on_triangle(tri, u1, u2);
-            let hit = scene.closest(x, dir, p)?;
-            if hit.t >= gap || patches.is_emitter(hit.patch) {
-                return None;
-            }
-            let front = patches.normal[hit.patch].dot(dir) < 0.0;
-            let patch = hit.patch as u32;
-            match covers
-                .iter_mut()
-                .find(|c| c.patch == patch && c.front == front)
-            {
-                Some(c) => c.share += share,
-                None => covers.push(Cover {
-                    patch,
-                    share,
-                    front,
-                }),
-            }
+            crate::geometry::sampling::point_on_triangle(tri, u1, u2)
+        })
+        .collect();
+    (gap, dir, points)
+}
+
+/// The covers of emitter `p`'s face toward `axis` (its normal or the opposite), when every one
+/// of its grid points' rays along `axis` meets a surface that does not emit within the gap;
+/// `None` otherwise.
+fn covers_of(patches: &Patches, scene: &RayScene, p: usize, axis: DVec3) -> Option<Vec<Cover>> {
+    let (gap, dir, points) = cover_rays(patches, p, axis);
+    let share = 1.0 / points.len() as f64;
+    let mut covers: Vec<Cover> = Vec::new();
+    for x in points {
+        let hit = scene.closest(x, dir, p)?;
+        if hit.t >= gap || patches.is_emitter(hit.patch) {
+            return None;
+        }
+        let front = patches.normal[hit.patch].dot(dir) < 0.0;
+        let patch = hit.patch as u32;
+        match covers
+            .iter_mut()
+            .find(|c| c.patch == patch && c.front == front)
+        {
+            Some(c) => c.share += share,
+            None => covers.push(Cover {
+                patch,
+                share,
+                front,
+            }),
         }
     }
     Some(covers)
+}
+
+/// True when patch `p`'s face toward `axis` (its normal or the opposite) is covered as an
+/// emitter's face is for [`Cavities::find`]: every one of its grid points' rays along `axis`
+/// meets a surface that does not emit within [`COVERED_GAP`] of its size. Such a face sees
+/// almost only its cover: what reaches it enters the gap at its edges (`solve::sealed` solves
+/// it dark). Each point's ray is first tested for any surface within the gap, and the face is
+/// not covered at its first point with none.
+pub fn covered(patches: &Patches, scene: &RayScene, p: usize, axis: DVec3) -> bool {
+    let (gap, dir, points) = cover_rays(patches, p, axis);
+    points.into_iter().all(|x| {
+        !scene.visible(x, dir, gap, p, p)
+            && scene
+                .closest(x, dir, p)
+                .is_some_and(|hit| hit.t < gap && !patches.is_emitter(hit.patch))
+    })
 }
 
 #[cfg(test)]
