@@ -35,6 +35,25 @@ fn solve(scene: &Scene) -> Solution {
     .expect("solves")
 }
 
+/// Asserts that every triangle of `faces` is sealed (in `sealed`, the scene's
+/// [`sealed_fronts`]) and solved black; returns the solution.
+fn assert_sealed_and_dark(
+    scene: &Scene,
+    sealed: &[bool],
+    faces: std::ops::Range<usize>,
+) -> Solution {
+    assert!(
+        faces.clone().all(|t| sealed[t]),
+        "{:?}",
+        &sealed[faces.clone()]
+    );
+    let got = solve(scene);
+    for t in faces {
+        assert_eq!(got.triangle_radiance[t], [0.0; 3], "triangle {t}");
+    }
+    got
+}
+
 /// A one-sided box with reversed faces is solved as the box facing out with those faces black
 /// (their outside is a back, which absorbs): the same result to rounding, the reversed faces'
 /// fronts (inside) dark. And it agrees with the dense oracle solving the box as given.
@@ -299,15 +318,7 @@ fn slab_with_a_plate_through_it(corners: [DVec3; 4], facing: DVec3) {
         "the plate is lit: {:?}",
         &sealed[plate.clone()]
     );
-    assert!(
-        slab.clone().all(|t| sealed[t]),
-        "{:?}",
-        &sealed[slab.clone()]
-    );
-    let got = solve(&scene);
-    for t in slab {
-        assert_eq!(got.triangle_radiance[t], [0.0; 3], "triangle {t}");
-    }
+    let got = assert_sealed_and_dark(&scene, &sealed, slab);
     for t in plate {
         assert!(
             got.triangle_radiance[t][0] > 0.0,
@@ -370,16 +381,7 @@ fn a_strip_just_over_a_lit_plate_is_dark_underneath() {
     for t in strip.clone() {
         assert!(patches.normal[t].y < -0.99, "the strip faces down: {t}");
     }
-    let sealed = sealed_fronts(&patches);
-    assert!(
-        strip.clone().all(|t| sealed[t]),
-        "{:?}",
-        &sealed[strip.clone()]
-    );
-    let got = solve(&scene);
-    for t in strip {
-        assert_eq!(got.triangle_radiance[t], [0.0; 3], "triangle {t}");
-    }
+    let got = assert_sealed_and_dark(&scene, &sealed_fronts(&patches), strip);
     // The plate (triangles 2 and 3 of the occluder scene) is lit around the strip.
     assert!(got.triangle_radiance[2][0] > 0.0 && got.triangle_radiance[3][0] > 0.0);
 }
