@@ -163,8 +163,8 @@ struct Seen {
     lit_rays: usize,
     /// Those rays' points met, with the patch met: where the face saw light.
     lit_points: Vec<(DVec3, u32)>,
-    /// The other candidate faces its cosine rays met (once per ray): face, point met, patch.
-    faces: Vec<(u32, DVec3, u32)>,
+    /// The other candidate faces its cosine rays met (once per ray; `sees` is set in step 3).
+    faces: Vec<Met>,
 }
 
 /// Per patch: its front is sealed (see the module). All false when no patch is.
@@ -293,7 +293,12 @@ pub fn sealed_faces(patches: &Patches) -> (Vec<bool>, Vec<bool>) {
                         seen.lit_points.push((hit.point, hit.patch as u32));
                     }
                 } else if candidate[g] {
-                    seen.faces.push((g as u32, hit.point, hit.patch as u32));
+                    seen.faces.push(Met {
+                        face: g as u32,
+                        sees: false,
+                        point: hit.point,
+                        patch: hit.patch as u32,
+                    });
                 }
             }
             seen.by_light = seen.by_light
@@ -319,25 +324,20 @@ pub fn sealed_faces(patches: &Patches) -> (Vec<bool>, Vec<bool>) {
             // are (those faces are lit from the start of 4.): the rest are not checked.
             let mut counted = s.lit_rays;
             let mut hits = Vec::with_capacity(s.faces.len());
-            for &(g, point, q) in &s.faces {
+            for hit in &s.faces {
                 if counted > allowed {
                     break;
                 }
-                let sees = by_light[g as usize]
+                let sees = by_light[hit.face as usize]
                     && emitters.seen_from_point(
                         patches,
                         &rays,
-                        (point, normal(g as usize), q as usize),
+                        (hit.point, normal(hit.face as usize), hit.patch as usize),
                         &mut rng,
                         FIRST_RAYS,
                     );
                 counted += usize::from(sees);
-                hits.push(Met {
-                    face: g,
-                    sees,
-                    point,
-                    patch: q,
-                });
+                hits.push(Met { sees, ..*hit });
             }
             hits
         })
@@ -434,15 +434,26 @@ fn sees_lit_point(
     (x, normal, p): (DVec3, DVec3, usize),
     lit: &[(DVec3, u32)],
 ) -> bool {
-    lit.iter().take(LIT_POINTS_CHECKED).any(|&(y, q)| {
-        let to = y - x;
-        let dist = to.length();
-        if !(dist > 0.0 && dist.is_finite()) {
-            return false;
-        }
-        let dir = to / dist;
-        normal.dot(dir) > 0.0 && rays.visible(x, dir, dist, p, q as usize)
-    })
+    (lit.iter().take(LIT_POINTS_CHECKED))
+        .any(|&(y, q)| sees_point(rays, (x, normal, p), (y, q as usize), |_| true))
+}
+
+/// True when point `y` on patch `q` lies in front of the face of unit `normal` at point `x` on
+/// patch `p`, `facing` holds for the unit direction from `x` to `y`, and nothing lies between
+/// them.
+fn sees_point(
+    rays: &RayScene,
+    (x, normal, p): (DVec3, DVec3, usize),
+    (y, q): (DVec3, usize),
+    facing: impl FnOnce(DVec3) -> bool,
+) -> bool {
+    let to = y - x;
+    let dist = to.length();
+    if !(dist > 0.0 && dist.is_finite()) {
+        return false;
+    }
+    let dir = to / dist;
+    normal.dot(dir) > 0.0 && facing(dir) && rays.visible(x, dir, dist, p, q)
 }
 
 /// The emitting patches and the cumulative distribution of their power, for shadow rays.
@@ -516,15 +527,9 @@ impl Emitters {
         let u = (i as f64 + rng.next_f64()) / count as f64;
         let e = self.patch[interval_of(&self.cdf, u)];
         let y = point_on_triangle(&patches.corners[e], rng.next_f64(), rng.next_f64());
-        let to = y - x;
-        let dist = to.length();
-        if !(dist > 0.0 && dist.is_finite()) {
-            return false;
-        }
-        let dir = to / dist;
-        normal.dot(dir) > 0.0
-            && (patches.is_two_sided(e) || patches.normal[e].dot(dir) < 0.0)
-            && rays.visible(x, dir, dist, p, e)
+        sees_point(rays, (x, normal, p), (y, e), |dir| {
+            patches.is_two_sided(e) || patches.normal[e].dot(dir) < 0.0
+        })
     }
 }
 
@@ -534,9 +539,7 @@ fn lit_by_analytic(patches: &Patches, rays: &RayScene, p: usize, normal: DVec3) 
     let x = patches.centroid[p];
     patches.lights.iter().any(|light| match *light {
         Light::Point { position, .. } | Light::Spot { position, .. } => {
-            let to: DVec3 = position - x;
-            let dist = to.length();
-            dist > 0.0 && normal.dot(to) > 0.0 && rays.visible(x, to / dist, dist, p, p)
+            sees_point(rays, (x, normal, p), (position, p), |_| true)
         }
         Light::Sun { direction, .. } => {
             normal.dot(-direction) > 0.0 && rays.closest(x, -direction, p).is_none()
